@@ -1,0 +1,366 @@
+"""JointModel: a mass-normalised 1-DOF joint model made of catalogue effects.
+
+The equation of motion, with x the displacement relative to the base::
+
+    ẍ + Σ_i c_i φ_i(x, ẋ) = −a_base(t)
+
+where each φ_i is a catalogue effect (:mod:`identification.effects`) and the
+hysteretic ``microslip`` term, when present, is a Jenkins element whose force
+is scaled by its coefficient.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from identification.artifacts import atomic_write_text
+from identification.effects import (
+    CATALOGUE,
+    get_effect,
+    restoring_force,
+)
+
+__all__ = ["PRESETS", "JointModel", "Term"]
+
+FORMAT = "pm-joint/JointModel"
+FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Term:
+    """One effect of a model with its coefficient and shape parameters."""
+
+    effect: str
+    coefficient: float
+    shape: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        effect = get_effect(self.effect)
+        if not math.isfinite(self.coefficient):
+            raise ValueError(f"coefficient of {self.effect!r} is not finite: {self.coefficient}")
+        p0, p1 = effect.shape_values(**self.shape)  # validates names and values
+        object.__setattr__(self, "coefficient", float(self.coefficient))
+        object.__setattr__(self, "shape", dict(zip(effect.shape, (p0, p1), strict=False)))
+
+    def text(self, precision: int = 4) -> str:
+        """The term as it reads in an equation, coefficient included."""
+        term = get_effect(self.effect).term
+        if self.effect == "microslip":
+            term = f"Jenkins(x; k_t={self.shape['k_t']:.{precision}g}, F_s={self.shape['F_s']:.{precision}g})"
+        else:
+            for name, value in self.shape.items():
+                if name != "v_reg":  # a numerical device, not part of the physics
+                    term = term.replace(name, f"{value:.{precision}g}")
+        return f"{abs(self.coefficient):.{precision}g}·{term}"
+
+
+class JointModel:
+    """A 1-DOF joint model ``ẍ + Σ c_i φ_i(x, ẋ) = −a_base``.
+
+    Parameters
+    ----------
+    terms
+        Either a mapping ``{effect_name: coefficient}`` (with
+        ``{effect_name: {"coefficient": c, **shape}}`` for shape parameters)
+        or an iterable of :class:`Term`.
+    name
+        Free-text label kept in JSON files and reports.
+
+    Examples
+    --------
+    >>> m = JointModel({"linear_stiffness": (2 * np.pi * 100) ** 2, "cubic_stiffness": 1e9})
+    >>> round(m.linear_frequency_hz, 6)
+    100.0
+    """
+
+    def __init__(self, terms: Mapping[str, Any] | Iterable[Term], name: str = "") -> None:
+        if isinstance(terms, Mapping):
+            terms = [_term_from_entry(k, v) for k, v in terms.items()]
+        terms = tuple(terms)
+        seen = set()
+        for t in terms:
+            if t.effect in seen:
+                raise ValueError(f"effect {t.effect!r} appears twice in the model")
+            seen.add(t.effect)
+        # Catalogue order keeps equations, parameter vectors and JSON stable.
+        self.terms: tuple[Term, ...] = tuple(sorted(terms, key=lambda t: CATALOGUE[t.effect].index))
+        self.name = name
+
+    # ------------------------------------------------------------------ access
+    @property
+    def effects(self) -> list[str]:
+        """Catalogue names of the model's effects, in catalogue order."""
+        return [t.effect for t in self.terms]
+
+    def __contains__(self, effect: str) -> bool:
+        return effect in self.effects
+
+    def __getitem__(self, effect: str) -> Term:
+        for t in self.terms:
+            if t.effect == effect:
+                return t
+        raise KeyError(f"effect {effect!r} is not in the model (it has {self.effects})")
+
+    def coefficient(self, effect: str) -> float:
+        """Coefficient of ``effect``, 0 when the model does not have it."""
+        return self[effect].coefficient if effect in self else 0.0
+
+    @property
+    def has_microslip(self) -> bool:
+        return "microslip" in self
+
+    @property
+    def linear_stiffness(self) -> float:
+        """Small-amplitude stiffness (1/s²): linear term plus a sticking Jenkins spring."""
+        k = self.coefficient("linear_stiffness")
+        if self.has_microslip:
+            term = self["microslip"]
+            k += term.coefficient * term.shape["k_t"]
+        return k
+
+    @property
+    def linear_frequency_hz(self) -> float:
+        """Natural frequency of the linearised model (Hz)."""
+        k = self.linear_stiffness
+        if k <= 0:
+            raise ValueError(f"model has no positive linear stiffness (k = {k})")
+        return math.sqrt(k) / (2 * math.pi)
+
+    # --------------------------------------------------------------- building
+    def with_effect(self, effect: str, coefficient: float, **shape: float) -> JointModel:
+        """A copy with ``effect`` added; ValueError if it is already present."""
+        if effect in self:
+            raise ValueError(f"effect {effect!r} is already in the model")
+        return JointModel([*self.terms, Term(effect, coefficient, shape)], name=self.name)
+
+    def without(self, effect: str) -> JointModel:
+        """A copy with ``effect`` removed."""
+        self[effect]
+        return JointModel([t for t in self.terms if t.effect != effect], name=self.name)
+
+    def replace(self, **coefficients: float) -> JointModel:
+        """A copy with new coefficients or shape values, by parameter name.
+
+        Names are those of :attr:`parameter_names`, with ``.`` written ``__``
+        when passed as keywords (``microslip__k_t=...``) or as a dict via
+        :meth:`with_parameters`.
+        """
+        return self.with_parameters({k.replace("__", "."): v for k, v in coefficients.items()})
+
+    def with_parameters(self, values: Mapping[str, float]) -> JointModel:
+        """A copy with the named parameters (see :attr:`parameter_names`) set."""
+        unknown = set(values) - set(self.parameter_names)
+        if unknown:
+            raise ValueError(
+                f"unknown parameter(s) {sorted(unknown)}; the model has {self.parameter_names}"
+            )
+        terms = []
+        for t in self.terms:
+            shape = {n: values.get(f"{t.effect}.{n}", v) for n, v in t.shape.items()}
+            terms.append(Term(t.effect, values.get(t.effect, t.coefficient), shape))
+        return JointModel(terms, name=self.name)
+
+    # ------------------------------------------------------- parameter vector
+    @property
+    def parameter_names(self) -> list[str]:
+        """Flat parameter names: each effect's coefficient, then ``effect.shape``.
+
+        The regularising velocity ``v_reg`` of the friction terms is a numerical
+        device, not a physical parameter, and is left out.
+        """
+        names = []
+        for t in self.terms:
+            names.append(t.effect)
+            names += [f"{t.effect}.{n}" for n in t.shape if n != "v_reg"]
+        return names
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """Current value of every parameter in :attr:`parameter_names`."""
+        out = {}
+        for t in self.terms:
+            out[t.effect] = t.coefficient
+            out.update({f"{t.effect}.{n}": v for n, v in t.shape.items() if n != "v_reg"})
+        return out
+
+    # ---------------------------------------------------------------- physics
+    def kernel_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(indices, coefficients, shapes)`` of the memoryless terms for numba kernels.
+
+        ``shapes`` has two columns (``p0, p1`` of the force kernels). The
+        ``microslip`` term is excluded; see :meth:`microslip_arrays`.
+        """
+        memoryless = [t for t in self.terms if t.effect != "microslip"]
+        indices = np.array([CATALOGUE[t.effect].index for t in memoryless], dtype=np.int64)
+        coefficients = np.array([t.coefficient for t in memoryless], dtype=np.float64)
+        shapes = np.zeros((len(memoryless), 2))
+        for i, t in enumerate(memoryless):
+            shapes[i] = CATALOGUE[t.effect].shape_values(**t.shape)
+        return indices, coefficients, shapes
+
+    def microslip_arrays(self) -> tuple[float, float, float]:
+        """``(coefficient, k_t, F_s)`` of the Jenkins element; zeros when absent."""
+        if not self.has_microslip:
+            return 0.0, 0.0, 0.0
+        t = self["microslip"]
+        return t.coefficient, t.shape["k_t"], t.shape["F_s"]
+
+    def restoring_force(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Σ c_i φ_i(x, v) along a trajectory (the microslip element starts unstressed)."""
+        x = np.asarray(x, dtype=float)
+        v = np.asarray(v, dtype=float)
+        total = np.zeros(np.broadcast(x, v).shape)
+        for t in self.terms:
+            total = total + t.coefficient * CATALOGUE[t.effect].feature(x, v, **t.shape)
+        return total
+
+    def rhs(self, t: float, state: np.ndarray, base_acceleration: float) -> np.ndarray:
+        """Right-hand side of the first-order system, for ODE solvers.
+
+        ``state`` is ``[x, ẋ]``, or ``[x, ẋ, z]`` when the model has microslip,
+        with ``z`` the Jenkins slider force (differential form: ż = k_t ẋ while
+        sticking, 0 while slipping).
+        """
+        x, v = state[0], state[1]
+        idx, coef, shapes = self.kernel_arrays()
+        f = restoring_force(idx, coef, shapes, x, v)
+        if not self.has_microslip:
+            return np.array([v, -f - base_acceleration])
+        c, k_t, f_s = self.microslip_arrays()
+        z = state[2]
+        sticking = abs(z) < f_s or z * v < 0
+        return np.array([v, -f - c * z - base_acceleration, k_t * v if sticking else 0.0])
+
+    @property
+    def state_size(self) -> int:
+        """Length of the state vector of :meth:`rhs`."""
+        return 3 if self.has_microslip else 2
+
+    # -------------------------------------------------------------------- text
+    def equation(self, precision: int = 4) -> str:
+        """The equation of motion as readable text."""
+        text = "ẍ"
+        for t in self.terms:
+            sign = "−" if t.coefficient < 0 else "+"
+            text += f" {sign} {t.text(precision)}"
+        return text + " = −a_base(t)"
+
+    def __repr__(self) -> str:
+        label = f" {self.name!r}" if self.name else ""
+        return f"<JointModel{label}: {self.equation()}>"
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, JointModel) and self.terms == other.terms
+
+    def __hash__(self) -> int:
+        return hash(tuple((t.effect, t.coefficient, tuple(t.shape.items())) for t in self.terms))
+
+    # -------------------------------------------------------------------- JSON
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready description (see :meth:`from_dict`)."""
+        return {
+            "format": FORMAT,
+            "version": FORMAT_VERSION,
+            "name": self.name,
+            "equation": self.equation(),
+            "terms": [
+                {"effect": t.effect, "coefficient": t.coefficient, "shape": dict(t.shape)}
+                for t in self.terms
+            ],
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], source: str = "model") -> JointModel:
+        """Build a model from :meth:`to_dict` output; ValueError naming what is wrong."""
+        if not isinstance(data, Mapping):
+            raise ValueError(f"{source}: expected a JSON object, got {type(data).__name__}")
+        if data.get("format", FORMAT) != FORMAT:
+            raise ValueError(f"{source}: not a JointModel file (format {data.get('format')!r})")
+        if "terms" not in data:
+            raise ValueError(f"{source}: missing field 'terms'")
+        terms = []
+        for i, entry in enumerate(data["terms"]):
+            where = f"{source}: terms[{i}]"
+            if not isinstance(entry, Mapping):
+                raise ValueError(f"{where}: expected an object")
+            for key in ("effect", "coefficient"):
+                if key not in entry:
+                    raise ValueError(f"{where}: missing field {key!r}")
+            try:
+                coefficient = float(entry["coefficient"])
+                terms.append(Term(entry["effect"], coefficient, dict(entry.get("shape", {}))))
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"{where} ({entry.get('effect')!r}): {exc}") from None
+        return cls(terms, name=str(data.get("name", "")))
+
+    def to_json(self, path: str | Path) -> Path:
+        """Write the model as JSON (atomically)."""
+        return atomic_write_text(path, json.dumps(self.to_dict(), indent=2, ensure_ascii=False))
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> JointModel:
+        """Read a model written by :meth:`to_json`."""
+        path = Path(path)
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}: not valid JSON ({exc})") from None
+        return cls.from_dict(data, source=str(path))
+
+    # ----------------------------------------------------------------- presets
+    @classmethod
+    def preset(cls, name: str) -> JointModel:
+        """A named model from :data:`PRESETS`."""
+        try:
+            return cls(PRESETS[name], name=name)
+        except KeyError:
+            raise ValueError(f"unknown preset {name!r}; available: {', '.join(PRESETS)}") from None
+
+
+def _term_from_entry(effect: str, value: Any) -> Term:
+    if isinstance(value, Mapping):
+        value = dict(value)
+        if "coefficient" not in value:
+            raise ValueError(f"effect {effect!r}: missing 'coefficient'")
+        coefficient = value.pop("coefficient")
+        return Term(effect, coefficient, value)
+    return Term(effect, value)
+
+
+def _pandey2025() -> dict[str, float]:
+    """The paper's Eq. 3 mapped onto the catalogue.
+
+    Eq. 3 reads ẍ + k1 x + k2 ẋ − k3 x² − k4 xẋ + k5 ẋ² − k6 x³ − k7 xẋ² − k8 ẋ³
+    − k9 x|x| + k10 ẋ|ẋ| + k11 (1 − k12 x²) ẋ = f. Catalogue terms are added on
+    the left-hand side, so the minus signs go into the coefficients, and
+    k11 (1 − k12 x²) ẋ splits into viscous damping k11 and Van der Pol −k11 k12.
+    The excitation f is the base term −a_base.
+    """
+    k = dict(
+        k1=4.49e5, k2=1.85, k3=2.60e7, k4=2.95e4, k5=60.5, k6=3.32e9,
+        k7=2.33e4, k8=9.50, k9=3.35e7, k10=11.6, k11=5.66, k12=5.10e5,
+    )  # fmt: skip
+    return {
+        "linear_stiffness": k["k1"],
+        "viscous_damping": k["k2"] + k["k11"],
+        "quadratic_stiffness": -k["k3"],
+        "stiffness_damping_coupling": -k["k4"],
+        "velocity_squared": k["k5"],
+        "cubic_stiffness": -k["k6"],
+        "displacement_velocity_squared": -k["k7"],
+        "cubic_damping": -k["k8"],
+        "abs_stiffness": -k["k9"],
+        "quadratic_damping": k["k10"],
+        "van_der_pol": -k["k11"] * k["k12"],
+    }
+
+
+#: Named models. ``pandey2025`` is the paper's identified Eq. 3.
+PRESETS: dict[str, dict[str, Any]] = {"pandey2025": _pandey2025()}
