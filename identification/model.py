@@ -53,7 +53,8 @@ class Term:
         """The term as it reads in an equation, coefficient included."""
         term = get_effect(self.effect).term
         if self.effect == "microslip":
-            term = f"Jenkins(x; k_t={self.shape['k_t']:.{precision}g}, F_s={self.shape['F_s']:.{precision}g})"
+            k_t, f_s = self.shape["k_t"], self.shape["F_s"]
+            term = f"Jenkins(x; k_t={k_t:.{precision}g}, F_s={f_s:.{precision}g})"
         else:
             for name, value in self.shape.items():
                 if name != "v_reg":  # a numerical device, not part of the physics
