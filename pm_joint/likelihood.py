@@ -29,6 +29,7 @@ from scipy import stats
 
 from identification.backbone import BackboneSet
 from pm_joint.fitting import CANDIDATES, DistributionFit, fit_best
+from pm_joint.ops import BACKBONE_COLUMNS
 
 __all__ = [
     "BackboneAmplitude",
@@ -39,8 +40,6 @@ __all__ = [
     "logp_graph",
 ]
 
-#: Columns of the common backbone layout every forward Op returns.
-BACKBONE_COLUMNS = ("amplitude_m", "frequency_hz", "damping_ratio")
 CHANNELS = ("frequency_hz", "damping_ratio")
 
 
