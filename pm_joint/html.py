@@ -1,0 +1,127 @@
+"""A static HTML page for a run: sections of text, tables and figures.
+
+No network, no scripts: the page only links files that sit beside it, so the
+folder can be zipped and opened anywhere.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from identification.artifacts import atomic_write_text
+
+__all__ = ["Section", "missing_links", "write_index"]
+
+_STYLE = """
+body { font-family: system-ui, sans-serif; max-width: 1100px; margin: 2em auto; padding: 0 1em;
+       color: #222; line-height: 1.45; }
+h1 { border-bottom: 2px solid #446; } h2 { margin-top: 2em; color: #335; }
+figure { display: inline-block; margin: 0.5em; vertical-align: top; max-width: 100%; }
+figure img { max-width: 520px; width: 100%; border: 1px solid #ddd; }
+figcaption { font-size: 0.85em; color: #555; max-width: 520px; }
+table { border-collapse: collapse; margin: 0.5em 0; font-size: 0.9em; }
+td, th { border: 1px solid #ccc; padding: 0.2em 0.6em; text-align: right; }
+th { background: #eef; } td:first-child, th:first-child { text-align: left; }
+pre { background: #f6f6f6; padding: 0.6em; overflow-x: auto; }
+nav a { margin-right: 1em; }
+"""
+
+
+@dataclass
+class Section:
+    """One section of the page.
+
+    ``figures`` are (path relative to the page, caption) pairs; ``tables``
+    are (title, rows) with rows a list of dicts sharing keys; ``files`` are
+    (path, label) links to data files.
+    """
+
+    title: str
+    text: str = ""
+    figures: Sequence[tuple[str, str]] = field(default_factory=list)
+    tables: Sequence[tuple[str, Sequence[Mapping]]] = field(default_factory=list)
+    files: Sequence[tuple[str, str]] = field(default_factory=list)
+    code: str = ""
+
+    @property
+    def anchor(self) -> str:
+        return "".join(c if c.isalnum() else "-" for c in self.title.lower()).strip("-")
+
+
+def _format(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, (list, dict)):
+        return html.escape(json.dumps(value, default=str))
+    return html.escape(str(value))
+
+
+def _table(title: str, rows: Sequence[Mapping]) -> str:
+    if not rows:
+        return f"<p><em>{html.escape(title)}: none</em></p>"
+    keys = list(rows[0])
+    head = "".join(f"<th>{html.escape(str(k))}</th>" for k in keys)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{_format(row.get(k, ''))}</td>" for k in keys) + "</tr>"
+        for row in rows
+    )
+    return f"<h3>{html.escape(title)}</h3><table><tr>{head}</tr>{body}</table>"
+
+
+def _section(section: Section) -> str:
+    parts = [f'<h2 id="{section.anchor}">{html.escape(section.title)}</h2>']
+    if section.text:
+        parts += [f"<p>{html.escape(p)}</p>" for p in section.text.split("\n\n")]
+    if section.code:
+        parts.append(f"<pre>{html.escape(section.code)}</pre>")
+    for title, rows in section.tables:
+        parts.append(_table(title, rows))
+    for src, caption in section.figures:
+        src_attr = html.escape(Path(src).as_posix(), quote=True)
+        parts.append(
+            f'<figure><a href="{src_attr}"><img src="{src_attr}" alt="{html.escape(caption)}">'
+            f"</a><figcaption>{html.escape(caption)}</figcaption></figure>"
+        )
+    if section.files:
+        links = ", ".join(
+            f'<a href="{html.escape(Path(p).as_posix(), quote=True)}">{html.escape(label)}</a>'
+            for p, label in section.files
+        )
+        parts.append(f"<p>Data: {links}</p>")
+    return "\n".join(parts)
+
+
+def write_index(folder: str | os.PathLike, title: str, sections: Sequence[Section]) -> Path:
+    """Write ``folder/index.html``; every link is relative to ``folder``."""
+    folder = Path(folder)
+    nav = " ".join(f'<a href="#{s.anchor}">{html.escape(s.title)}</a>' for s in sections)
+    page = (
+        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+        f"<title>{html.escape(title)}</title><style>{_STYLE}</style></head><body>"
+        f"<h1>{html.escape(title)}</h1><nav>{nav}</nav>\n"
+        + "\n".join(_section(s) for s in sections)
+        + "\n</body></html>\n"
+    )
+    return atomic_write_text(folder / "index.html", page)
+
+
+def missing_links(index: str | os.PathLike) -> list[str]:
+    """``src``/``href`` targets of a page that do not exist beside it (anchors excluded)."""
+    from html.parser import HTMLParser
+
+    index = Path(index)
+    targets: list[str] = []
+
+    class _Links(HTMLParser):
+        def handle_starttag(self, tag, attrs):
+            for name, value in attrs:
+                if name in ("src", "href") and value and not value.startswith("#"):
+                    targets.append(value)
+
+    _Links().feed(index.read_text(encoding="utf-8"))
+    return [t for t in targets if not (index.parent / t).exists()]

@@ -1,0 +1,184 @@
+import json
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+from arviz_base import from_dict
+
+from identification import harmonic
+from identification.backbone import Backbone, BackboneSet
+from identification.model import JointModel
+from pm_joint.likelihood import BackboneDensity, amplitude_levels, level_marks
+from pm_joint.report import (
+    _pair_groups,
+    correlation_matrix,
+    default_var_names,
+    level_pdfs,
+    plot_level_pdfs,
+    report,
+    summarize,
+)
+
+W0 = 2 * np.pi * 100.0
+AMPS = np.linspace(5e-5, 1.5e-3, 30)
+NAMES = ["linear_stiffness", "cubic_stiffness"]
+TEMPLATE = JointModel({"linear_stiffness": W0**2, "cubic_stiffness": 1e10, "viscous_damping": 5.0})
+CHAINS, DRAWS = 2, 500
+
+
+def population(n, rng):
+    """Parameter vectors of a population of Duffing joints, (n, 2)."""
+    return np.column_stack(
+        [W0**2 * (1 + 0.01 * rng.normal(size=n)), 1e10 * (1 + 0.2 * rng.normal(size=n))]
+    )
+
+
+def frequencies(theta, amplitudes_m):
+    """Single-harmonic Duffing backbones, (n_sets, n_amplitudes) in Hz."""
+    return harmonic.backbone(TEMPLATE, amplitudes_m, parameters=theta, names=NAMES).frequency_hz
+
+
+@pytest.fixture(scope="module")
+def measured():
+    theta = population(60, np.random.default_rng(0))
+    hb = harmonic.backbone(TEMPLATE, AMPS, parameters=theta, names=NAMES)
+    return BackboneSet(
+        Backbone(AMPS, f, d, label=f"c{i}")
+        for i, (f, d) in enumerate(zip(hb.frequency_hz, hb.damping_ratio, strict=True))
+    )
+
+
+@pytest.fixture(scope="module")
+def density(measured):
+    return BackboneDensity.fit(measured, candidates=("norm", "gumbel_r", "gumbel_l"))
+
+
+def trace(theta, predicted, density, **attrs):
+    """A DataTree shaped like pm_joint.updating.sample's (2 chains × 500 draws)."""
+    rng = np.random.default_rng(7)
+    posterior = {n: theta[:, j].reshape(CHAINS, DRAWS) for j, n in enumerate(NAMES)}
+    posterior["backbone_predicted"] = predicted.reshape(CHAINS, DRAWS, -1)
+    return from_dict(
+        {
+            "posterior": posterior,
+            "sample_stats": {"accepted": (rng.uniform(size=(CHAINS, DRAWS, 2)) < 0.3) * 1.0},
+            "observed_data": {"backbone": density.observations},
+        },
+        attrs={"sample_stats": attrs},
+    )
+
+
+@pytest.fixture(scope="module")
+def same_population(density):
+    """Posterior-predictive draws from the population the measured curves came from."""
+    theta = population(CHAINS * DRAWS, np.random.default_rng(1))
+    return theta, frequencies(theta, density.amplitudes_m)
+
+
+def test_level_pdfs_of_the_measured_population_are_not_rejected(density, same_population):
+    result = level_pdfs(trace(*same_population, density), density)
+    assert list(result) == ["low", "mid", "high"]
+    marks = level_marks(density.amplitudes_m)
+    for level, entry in result.items():
+        expected = density.observations[:, marks[level]]  # one channel: column = level index
+        np.testing.assert_array_equal(entry["measured_hz"], expected)
+        assert entry["sampled_hz"].size == CHAINS * DRAWS
+        assert entry["distances"]["ks_pvalue"] > 0.05, level
+        assert entry["distances"]["wasserstein"] < 0.5 * expected.std()
+
+
+def test_level_pdfs_reject_a_shift_of_three_standard_deviations(density, same_population):
+    theta, predicted = same_population
+    shift = 3 * density.observations.std(axis=0, ddof=1)
+    result = level_pdfs(trace(theta, predicted + shift, density), density)
+    for level, entry in result.items():
+        expected = shift[entry["index"]]
+        assert entry["distances"]["ks_pvalue"] < 0.01, level
+        assert entry["distances"]["wasserstein"] == pytest.approx(expected, rel=0.15)
+        assert entry["mean_shift_hz"] == pytest.approx(expected, rel=0.15)
+        for fit in ("measured_fit", "sampled_fit"):
+            assert entry[fit].family in ("norm", "gumbel_r", "gumbel_l")
+    fig = plot_level_pdfs(result)
+    legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert any(t.startswith("KS") for t in legend) and any(t.startswith("W =") for t in legend)
+
+
+def test_a_density_fitted_elsewhere_is_refused(measured, density, same_population):
+    idata = trace(*same_population, density)
+    with pytest.raises(ValueError, match="levels"):
+        level_pdfs(idata, BackboneDensity.fit(measured, amplitude_levels(measured, n=7)))
+    other_levels = amplitude_levels(measured, inset=0.1)  # same count, other amplitudes
+    with pytest.raises(ValueError, match="observed_data"):
+        level_pdfs(idata, BackboneDensity.fit(measured, other_levels))
+
+
+def bivariate_trace(rho, offset=0.0):
+    rng = np.random.default_rng(3)
+    draws = rng.multivariate_normal([0, 0], [[1, rho], [rho, 1]], size=(CHAINS, DRAWS))
+    draws[1] += offset  # the second chain elsewhere: not converged
+    return from_dict({"posterior": {"a": draws[..., 0], "b": draws[..., 1]}})
+
+
+def test_correlation_matrix_recovers_a_known_correlation():
+    corr = correlation_matrix(bivariate_trace(0.8))
+    assert list(corr.columns) == ["a", "b"]
+    assert corr.loc["a", "b"] == pytest.approx(0.8, abs=0.05)
+    np.testing.assert_allclose(np.diag(corr), 1.0)
+
+
+def test_summary_diagnoses_mixed_and_unmixed_chains():
+    mixed = summarize(bivariate_trace(0.0), ["a", "b"])
+    for column in ("mean", "sd", "r_hat", "ess_bulk", "ess_tail"):
+        assert column in mixed.columns
+    assert any("94" in c for c in mixed.columns)  # the 94 % interval bounds
+    # Independent draws: R-hat ≈ 1, bulk ESS ≈ the number of draws.
+    np.testing.assert_allclose(mixed["r_hat"], 1.0, atol=0.01)
+    np.testing.assert_allclose(mixed["ess_bulk"], CHAINS * DRAWS, rtol=0.25)
+    stuck = summarize(bivariate_trace(0.0, offset=3.0), ["a"])
+    assert stuck.loc["a", "r_hat"] > 1.5
+
+
+def test_report_writes_every_file_it_lists(tmp_path, measured, density, same_population):
+    idata = trace(*same_population, density, sampling_time=12.5, tuning_steps=100)
+    assert default_var_names(idata) == NAMES  # backbone_predicted is no parameter
+    out = tmp_path / "report"
+    result = report(idata, measured, density=density, out=out)
+    assert json.loads((out / "report.json").read_text()) == result
+    assert set(result) >= {"summary", "correlation", "level_pdfs", "sampler", "files"}
+    assert result["files"][-1] == "report.json"
+    for name in result["files"]:
+        path = out / name
+        assert path.stat().st_size > 0, name
+        if name.endswith(".png"):
+            image = mpimg.imread(path)
+            assert image.ndim == 3 and image.shape[0] > 100 and np.ptp(image) > 0, name
+    assert {"pairs_1.png", "trace.png", "rank.png", "correlation.png"} <= set(result["files"])
+    assert [r["variable"] for r in result["summary"]] == NAMES
+    assert {"r_hat", "ess_bulk", "ess_tail"} <= set(result["summary"][0])
+    mid = result["level_pdfs"]["mid"]
+    assert mid["measured_fit"]["family"] and len(mid["sampled_fit"]["params"]) >= 2
+    assert set(mid["distances"]) == {"ks_statistic", "ks_pvalue", "wasserstein"}
+    sampler = result["sampler"]
+    assert sampler["sampler"] == "metropolis"
+    assert (sampler["draws"], sampler["chains"], sampler["wall_time_s"]) == (DRAWS, CHAINS, 12.5)
+    assert sampler["acceptance_rate"] == pytest.approx(0.3, abs=0.02)
+
+
+def test_report_fits_the_default_density_when_none_is_given(tmp_path, measured, same_population):
+    # The trace's observed values come from the default levels, so the default fit matches.
+    default = BackboneDensity.fit(measured, candidates=("norm",))
+    idata = trace(*same_population, default)
+    result = report(idata, measured, var_names=["cubic_stiffness"], out=tmp_path)
+    assert result["var_names"] == ["cubic_stiffness"]
+    assert all((tmp_path / name).is_file() for name in result["files"])
+
+
+def test_pair_matrices_hold_six_parameters_and_never_one_alone():
+    names = [f"k{i}" for i in range(1, 14)]
+    assert [len(g) for g in _pair_groups(names[:12])] == [6, 6]
+    assert _pair_groups(names)[-1] == ["k12", "k13"]  # the paper's 12 plus one more
+    assert _pair_groups(names[:3]) == [names[:3]]
