@@ -1,0 +1,200 @@
+"""The paper's backbone networks: a 1D-CNN autoencoder and a parameter-to-latent FFNN.
+
+Architecture (paper Tables 1–4), generalised to ``n_params`` inputs, ``n_levels``
+excitation levels (41 in the paper) and ``n_channels`` backbone channels (2:
+amplitude and frequency; optionally a 3rd, the damping ratio)::
+
+    Encoder  Conv1D(64, k5, same, elu) → Conv1D(32, k5, causal, dilation 4, elu)
+             → Flatten → Dense(64, relu)
+    Decoder  Dense(32·n_levels, relu) → Reshape(n_levels, 32)
+             → Conv1D(64, k5, causal, dilation 4, elu) → Conv1D(n_channels, k5, same)
+    FFNN     n_params → 4 × Dense(512, elu) → Dense(64)
+
+Layout: every public module takes and returns backbones as ``(batch, n_levels,
+n_channels)``, the dataset's (and Keras') channels-last layout. Inside, the
+convolutions run channels-first ``(batch, channels, n_levels)`` as torch wants,
+so Flatten and Reshape order their features (channel, level) where Keras orders
+them (level, channel): the same function class and the same parameter counts,
+but Keras weights would need that permutation to be loaded here.
+
+Padding follows Keras: "same" pads ``(k − 1)·d / 2`` on each side, "causal" pads
+``(k − 1)·d`` on the left only, so output point j sees input points ≤ j.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Literal
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional
+
+__all__ = [
+    "Autoencoder",
+    "Decoder",
+    "Encoder",
+    "KerasConv1d",
+    "LatentRegressor",
+    "NetConfig",
+    "PhysicalSurrogate",
+]
+
+
+@dataclass(frozen=True)
+class NetConfig:
+    """Sizes of the networks; the defaults are the paper's."""
+
+    latent_dim: int = 64
+    conv_filters: tuple[int, int] = (64, 32)
+    kernel_size: int = 5
+    dilation: int = 4
+    ffnn_width: int = 512
+    ffnn_depth: int = 4
+
+    def __post_init__(self) -> None:
+        sizes = (self.latent_dim, *self.conv_filters, self.ffnn_width, self.ffnn_depth)
+        if min(sizes) < 1 or self.dilation < 1:
+            raise ValueError(f"network sizes must be positive integers: {self}")
+        if self.kernel_size < 1 or self.kernel_size % 2 == 0:
+            raise ValueError(
+                f"kernel_size must be odd for Keras 'same' padding: {self.kernel_size}"
+            )
+        object.__setattr__(self, "conv_filters", tuple(int(f) for f in self.conv_filters))
+
+    def to_dict(self) -> dict:
+        """Plain-JSON form."""
+        return {**asdict(self), "conv_filters": list(self.conv_filters)}
+
+
+class KerasConv1d(nn.Module):
+    """Conv1d with Keras' "same" or "causal" padding on channels-first input."""
+
+    def __init__(
+        self,
+        in_channels: int,
+        out_channels: int,
+        kernel_size: int,
+        padding: Literal["same", "causal"],
+        dilation: int = 1,
+    ) -> None:
+        super().__init__()
+        total = (kernel_size - 1) * dilation
+        if padding == "same":
+            self.pad = (total // 2, total - total // 2)
+        elif padding == "causal":
+            self.pad = (total, 0)
+        else:
+            raise ValueError(f"padding must be 'same' or 'causal', got {padding!r}")
+        self.conv = nn.Conv1d(in_channels, out_channels, kernel_size, dilation=dilation)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.conv(functional.pad(x, self.pad))
+
+
+class Encoder(nn.Module):
+    """Backbone ``(batch, n_levels, n_channels)`` → latent ``(batch, latent_dim)``."""
+
+    def __init__(self, n_levels: int, n_channels: int, config: NetConfig = NetConfig()) -> None:
+        super().__init__()
+        f1, f2 = config.conv_filters
+        k, d = config.kernel_size, config.dilation
+        self.conv1 = KerasConv1d(n_channels, f1, k, "same")
+        self.conv2 = KerasConv1d(f1, f2, k, "causal", dilation=d)
+        self.dense = nn.Linear(f2 * n_levels, config.latent_dim)
+
+    def forward(self, backbone: torch.Tensor) -> torch.Tensor:
+        h = functional.elu(self.conv1(backbone.transpose(1, 2)))
+        h = functional.elu(self.conv2(h))
+        return functional.relu(self.dense(h.flatten(1)))
+
+
+class Decoder(nn.Module):
+    """Latent ``(batch, latent_dim)`` → backbone ``(batch, n_levels, n_channels)``."""
+
+    def __init__(self, n_levels: int, n_channels: int, config: NetConfig = NetConfig()) -> None:
+        super().__init__()
+        f1, f2 = config.conv_filters
+        k, d = config.kernel_size, config.dilation
+        self.n_levels, self.reshape_channels = n_levels, f2
+        self.dense = nn.Linear(config.latent_dim, f2 * n_levels)
+        self.conv1 = KerasConv1d(f2, f1, k, "causal", dilation=d)
+        self.conv2 = KerasConv1d(f1, n_channels, k, "same")
+
+    def forward(self, latent: torch.Tensor) -> torch.Tensor:
+        h = functional.relu(self.dense(latent))
+        h = h.reshape(-1, self.reshape_channels, self.n_levels)
+        h = functional.elu(self.conv1(h))
+        return self.conv2(h).transpose(1, 2)
+
+
+class LatentRegressor(nn.Module):
+    """The paper's FFNN: parameters scaled to [0, 1] → latent ``(batch, latent_dim)``."""
+
+    def __init__(self, n_params: int, config: NetConfig = NetConfig()) -> None:
+        super().__init__()
+        layers: list[nn.Module] = []
+        width_in = n_params
+        for _ in range(config.ffnn_depth):
+            layers += [nn.Linear(width_in, config.ffnn_width), nn.ELU()]
+            width_in = config.ffnn_width
+        layers.append(nn.Linear(width_in, config.latent_dim))
+        self.layers = nn.Sequential(*layers)
+
+    def forward(self, parameters: torch.Tensor) -> torch.Tensor:
+        return self.layers(parameters)
+
+
+class Autoencoder(nn.Module):
+    """Encoder followed by decoder: the first training stage."""
+
+    def __init__(self, n_levels: int, n_channels: int, config: NetConfig = NetConfig()) -> None:
+        super().__init__()
+        self.encoder = Encoder(n_levels, n_channels, config)
+        self.decoder = Decoder(n_levels, n_channels, config)
+
+    def forward(self, backbone: torch.Tensor) -> torch.Tensor:
+        return self.decoder(self.encoder(backbone))
+
+
+def _float32(values: np.ndarray) -> torch.Tensor:
+    return torch.as_tensor(np.asarray(values, dtype=np.float32))
+
+
+class PhysicalSurrogate(nn.Module):
+    """FFNN + decoder with the scalings folded in: physical parameters → physical backbones.
+
+    The input is min–max scaled with the training box, ``(p − low) / (high − low)``;
+    the decoder's output is un-scaled with ``y · scale + offset``, where ``offset``
+    and ``scale`` have shape ``(n_levels, n_channels)``. This is the graph that is
+    exported to ONNX, so the artifact needs no pre- or post-processing.
+    """
+
+    def __init__(
+        self,
+        regressor: LatentRegressor,
+        decoder: Decoder,
+        bounds: np.ndarray,
+        output_offset: np.ndarray,
+        output_scale: np.ndarray,
+    ) -> None:
+        super().__init__()
+        self.regressor, self.decoder = regressor, decoder
+        bounds = np.asarray(bounds, dtype=np.float64)
+        self.register_buffer("input_low", _float32(bounds[:, 0]))
+        self.register_buffer("input_span", _float32(bounds[:, 1] - bounds[:, 0]))
+        self.register_buffer("output_offset", _float32(output_offset))
+        self.register_buffer("output_scale", _float32(output_scale))
+
+    def scale_parameters(self, parameters: torch.Tensor) -> torch.Tensor:
+        """Physical parameters → the unit box the FFNN was trained on."""
+        return (parameters - self.input_low) / self.input_span
+
+    def scaled_backbones(self, unit_parameters: torch.Tensor) -> torch.Tensor:
+        """Unit-box parameters → backbones in the training (scaled) space."""
+        return self.decoder(self.regressor(unit_parameters))
+
+    def forward(self, parameters: torch.Tensor) -> torch.Tensor:
+        scaled = self.scaled_backbones(self.scale_parameters(parameters))
+        return scaled * self.output_scale + self.output_offset

@@ -1,0 +1,414 @@
+"""Running an exported backbone surrogate on onnxruntime, without torch.
+
+An exported surrogate is a folder with two files::
+
+    surrogate.onnx   one graph: physical parameters (batch, n_params), float32
+                     → physical backbones (batch, n_levels, n_channels), float32
+    surrogate.json   the sidecar: format, parameter names/order and training box,
+                     excitation levels, channels with units, scalers, training
+                     metrics and versions, and the SHA-256 of surrogate.onnx
+
+:class:`SurrogateSpec` is the contract both files share (it is also what
+training takes); :class:`SurrogateRuntime` loads the pair, checks that they
+belong together and refuses parameters outside the training box unless told
+otherwise. This module must stay importable without torch: the sampler's worker
+processes load surrogates and should not pay for (or need) torch.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import onnxruntime
+
+from identification.artifacts import sha256_bytes
+
+__all__ = [
+    "CHANNEL_UNITS",
+    "FORMAT",
+    "FORMAT_VERSION",
+    "MODEL_FILE",
+    "SIDECAR_FILE",
+    "SurrogateRuntime",
+    "SurrogateSpec",
+]
+
+FORMAT = "pm-joint/Surrogate"
+FORMAT_VERSION = 1
+MODEL_FILE = "surrogate.onnx"
+SIDECAR_FILE = "surrogate.json"
+
+#: Backbone channels a surrogate may predict, with their (SI) units.
+CHANNEL_UNITS = {"amplitude_m": "m", "frequency_hz": "Hz", "damping_ratio": "1"}
+
+Extrapolate = Literal["raise", "flag", "allow"]
+_EXTRAPOLATE = ("raise", "flag", "allow")
+
+
+@dataclass(frozen=True, eq=False)
+class SurrogateSpec:
+    """What a surrogate maps from and to.
+
+    Parameters
+    ----------
+    parameter_names
+        Input parameters, in the order of the parameter vector.
+    bounds
+        ``(n_params, 2)`` training box, ``[low, high]`` per parameter (SI).
+    levels
+        The fixed excitation levels of every backbone, increasing.
+    channels
+        Backbone channels, names from :data:`CHANNEL_UNITS`.
+    level_unit
+        Unit of ``levels`` (base-acceleration amplitude by default).
+    """
+
+    parameter_names: tuple[str, ...]
+    bounds: np.ndarray
+    levels: np.ndarray
+    channels: tuple[str, ...] = ("amplitude_m", "frequency_hz")
+    level_unit: str = "m/s^2"
+
+    def __post_init__(self) -> None:
+        names = tuple(str(n) for n in self.parameter_names)
+        if not names or len(set(names)) != len(names):
+            raise ValueError(f"parameter names must be non-empty and unique: {names}")
+        bounds = np.array(self.bounds, dtype=np.float64)
+        if bounds.shape != (len(names), 2):
+            raise ValueError(f"bounds must have shape ({len(names)}, 2), got {bounds.shape}")
+        for name, (low, high) in zip(names, bounds, strict=True):
+            if not (math.isfinite(low) and math.isfinite(high) and low < high):
+                raise ValueError(
+                    f"bounds of parameter {name!r} must be finite, low < high: [{low}, {high}]"
+                )
+        levels = np.array(self.levels, dtype=np.float64)
+        if levels.ndim != 1 or levels.size < 2 or not np.all(np.isfinite(levels)):
+            raise ValueError(f"levels must be a finite 1-D array of >= 2 values: {levels}")
+        if np.any(np.diff(levels) <= 0):
+            raise ValueError("levels must be strictly increasing")
+        channels = tuple(str(c) for c in self.channels)
+        unknown = [c for c in channels if c not in CHANNEL_UNITS]
+        if unknown or not channels or len(set(channels)) != len(channels):
+            raise ValueError(
+                f"channels must be unique names from {sorted(CHANNEL_UNITS)}, got {channels}"
+            )
+        bounds.flags.writeable = levels.flags.writeable = False
+        object.__setattr__(self, "parameter_names", names)
+        object.__setattr__(self, "bounds", bounds)
+        object.__setattr__(self, "levels", levels)
+        object.__setattr__(self, "channels", channels)
+
+    @property
+    def n_params(self) -> int:
+        return len(self.parameter_names)
+
+    @property
+    def n_levels(self) -> int:
+        return self.levels.size
+
+    @property
+    def n_channels(self) -> int:
+        return len(self.channels)
+
+    @property
+    def backbone_shape(self) -> tuple[int, int]:
+        """``(n_levels, n_channels)``: one backbone."""
+        return self.n_levels, self.n_channels
+
+    def channel_index(self, channel: str) -> int:
+        """Position of ``channel`` in the last axis of a backbone array."""
+        if channel not in self.channels:
+            raise ValueError(f"channel {channel!r} is not predicted; channels: {self.channels}")
+        return self.channels.index(channel)
+
+    def check_parameters(self, parameters: Any, what: str = "parameters") -> np.ndarray:
+        """``parameters`` as a finite float64 ``(n, n_params)`` array, else ValueError."""
+        array = np.asarray(parameters, dtype=np.float64)
+        if array.ndim == 1:
+            array = array[None, :]
+        if array.ndim != 2 or array.shape[1] != self.n_params:
+            raise ValueError(
+                f"{what}: expected vectors of {self.n_params} parameters "
+                f"({', '.join(self.parameter_names)}), got shape {np.shape(parameters)}"
+            )
+        bad = ~np.isfinite(array)
+        if bad.any():
+            row, col = np.argwhere(bad)[0]
+            raise ValueError(
+                f"{what}: parameter {self.parameter_names[col]!r} is not finite "
+                f"({array[row, col]}) in row {row}"
+            )
+        return array
+
+    def outside_box(self, parameters: np.ndarray) -> np.ndarray:
+        """Boolean mask of the rows of a checked ``(n, n_params)`` array outside the box."""
+        low, high = self.bounds[:, 0], self.bounds[:, 1]
+        return np.any((parameters < low) | (parameters > high), axis=1)
+
+    def require_in_box(
+        self, parameters: np.ndarray, what: str = "parameters", hint: str = ""
+    ) -> None:
+        """Raise ValueError naming the first parameter outside its training bound."""
+        for row, vector in enumerate(parameters):
+            for name, value, (low, high) in zip(
+                self.parameter_names, vector, self.bounds, strict=True
+            ):
+                if value < low or value > high:
+                    side, bound = ("lower", low) if value < low else ("upper", high)
+                    raise ValueError(
+                        f"{what}: parameter {name!r} = {value:.6g} in row {row} is outside the "
+                        f"training box ({side} bound {bound:.6g}){hint}"
+                    )
+
+    def check_backbones(self, backbones: Any, what: str = "backbones") -> np.ndarray:
+        """``backbones`` as a finite float64 ``(n, n_levels, n_channels)`` array."""
+        array = np.asarray(backbones, dtype=np.float64)
+        if array.ndim != 3 or array.shape[1:] != self.backbone_shape:
+            raise ValueError(
+                f"{what}: expected shape (n, {self.n_levels}, {self.n_channels}) "
+                f"for levels x channels {self.channels}, got {array.shape}"
+            )
+        bad = ~np.isfinite(array)
+        if bad.any():
+            row, level, channel = np.argwhere(bad)[0]
+            raise ValueError(
+                f"{what}: channel {self.channels[channel]!r} is not finite at "
+                f"level {level} of curve {row}"
+            )
+        return array
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-JSON form (as written in the sidecar)."""
+        return {
+            "parameter_names": list(self.parameter_names),
+            "bounds": self.bounds.tolist(),
+            "levels": self.levels.tolist(),
+            "level_unit": self.level_unit,
+            "channels": list(self.channels),
+            "channel_units": {c: CHANNEL_UNITS[c] for c in self.channels},
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> SurrogateSpec:
+        """Inverse of :meth:`to_dict`."""
+        missing = [k for k in ("parameter_names", "bounds", "levels", "channels") if k not in data]
+        if missing:
+            raise ValueError(f"surrogate spec lacks {', '.join(missing)}")
+        return cls(
+            parameter_names=tuple(data["parameter_names"]),
+            bounds=np.asarray(data["bounds"], dtype=np.float64),
+            levels=np.asarray(data["levels"], dtype=np.float64),
+            channels=tuple(data["channels"]),
+            level_unit=data.get("level_unit", "m/s^2"),
+        )
+
+
+class SurrogateRuntime:
+    """An exported surrogate on onnxruntime: physical parameters → physical backbones.
+
+    Picklable: it keeps the model bytes and builds the (unpicklable) inference
+    session lazily, once per process.
+
+    Parameters
+    ----------
+    model_bytes
+        The ONNX graph.
+    metadata
+        The sidecar's content; its ``onnx.sha256`` must match ``model_bytes``.
+    source
+        Where the pair came from, for error messages.
+    extrapolate
+        Default for :meth:`predict`: ``"raise"`` (ValueError for parameters
+        outside the training box), ``"flag"`` (also return the out-of-box mask)
+        or ``"allow"``.
+    threads
+        onnxruntime intra- and inter-op threads; 1 suits one sampler chain per core.
+    """
+
+    def __init__(
+        self,
+        model_bytes: bytes,
+        metadata: Mapping[str, Any],
+        *,
+        source: str = "<memory>",
+        extrapolate: Extrapolate = "raise",
+        threads: int = 1,
+    ) -> None:
+        if metadata.get("format") != FORMAT:
+            raise ValueError(
+                f"{source}: not a {FORMAT} sidecar (format {metadata.get('format')!r})"
+            )
+        if metadata.get("format_version", 0) > FORMAT_VERSION:
+            raise ValueError(
+                f"{source}: format version {metadata['format_version']} is newer "
+                f"than this pm-joint reads ({FORMAT_VERSION})"
+            )
+        expected = metadata.get("onnx", {}).get("sha256")
+        actual = sha256_bytes(model_bytes)
+        if expected != actual:
+            raise ValueError(
+                f"{source}: hash mismatch: the ONNX graph has SHA-256 {actual}, "
+                f"the sidecar records {expected}; the files do not belong together "
+                "or one was modified"
+            )
+        try:
+            self.spec = SurrogateSpec.from_dict(metadata)
+        except ValueError as error:
+            raise ValueError(f"{source}: sidecar: {error}") from None
+        self.metadata = dict(metadata)
+        self.source = source
+        self.extrapolate = _check_extrapolate(extrapolate)
+        self.threads = int(threads)
+        self._model_bytes = bytes(model_bytes)
+        self._session: onnxruntime.InferenceSession | None = None
+        self._check_graph()
+
+    @classmethod
+    def load(cls, folder: str | Path, **options: Any) -> SurrogateRuntime:
+        """Load ``folder/surrogate.onnx`` with its sidecar ``folder/surrogate.json``."""
+        folder = Path(folder)
+        sidecar = folder / SIDECAR_FILE
+        try:
+            metadata = json.loads(sidecar.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ValueError(f"{sidecar}: no surrogate sidecar here") from None
+        except json.JSONDecodeError as error:
+            raise ValueError(f"{sidecar}: not valid JSON ({error})") from None
+        model = folder / metadata.get("onnx", {}).get("file", MODEL_FILE)
+        if not model.is_file():
+            raise ValueError(f"{model}: the ONNX graph named by {sidecar} is missing")
+        return cls(model.read_bytes(), metadata, source=str(model), **options)
+
+    # -- the session ---------------------------------------------------------
+
+    @property
+    def session(self) -> onnxruntime.InferenceSession:
+        """The inference session, built on first use in each process."""
+        if self._session is None:
+            options = onnxruntime.SessionOptions()
+            options.intra_op_num_threads = self.threads
+            options.inter_op_num_threads = self.threads
+            options.execution_mode = onnxruntime.ExecutionMode.ORT_SEQUENTIAL
+            self._session = onnxruntime.InferenceSession(
+                self._model_bytes, options, providers=["CPUExecutionProvider"]
+            )
+        return self._session
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "_session": None}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+
+    def _check_graph(self) -> None:
+        inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
+        spec = self.spec
+        problem = None
+        if len(inputs) != 1 or len(outputs) != 1:
+            problem = f"the graph has {len(inputs)} inputs and {len(outputs)} outputs, not 1 and 1"
+        elif list(inputs[0].shape[1:]) != [spec.n_params] or len(inputs[0].shape) != 2:
+            problem = (
+                f"the graph takes {inputs[0].shape}, the sidecar names {spec.n_params} parameters"
+            )
+        elif list(outputs[0].shape[1:]) != list(spec.backbone_shape) or len(outputs[0].shape) != 3:
+            problem = (
+                f"the graph returns {outputs[0].shape}, the sidecar describes "
+                f"{spec.n_levels} levels x {spec.n_channels} channels"
+            )
+        elif isinstance(inputs[0].shape[0], int) or isinstance(outputs[0].shape[0], int):
+            problem = "the graph's batch axis is not dynamic"
+        if problem:
+            raise ValueError(f"{self.source}: sidecar does not match the graph: {problem}")
+        self._input_name = inputs[0].name
+
+    # -- predictions ---------------------------------------------------------
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return self.spec.parameter_names
+
+    @property
+    def bounds(self) -> np.ndarray:
+        return self.spec.bounds
+
+    @property
+    def levels(self) -> np.ndarray:
+        return self.spec.levels
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        return self.spec.channels
+
+    def predict(
+        self, parameters: Any, *, extrapolate: Extrapolate | None = None
+    ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """Backbones for parameter vectors.
+
+        Parameters
+        ----------
+        parameters
+            ``(n, n_params)`` or one ``(n_params,)`` vector, physical units, in the
+            order of :attr:`parameter_names`.
+        extrapolate
+            Overrides the runtime's default (see the class docstring).
+
+        Returns
+        -------
+        backbones
+            float64 ``(n, n_levels, n_channels)``, or ``(n_levels, n_channels)``
+            for a single vector.
+        outside
+            Only with ``extrapolate="flag"``: boolean mask, ``(n,)`` (or a
+            scalar for a single vector), True where a row is outside the box.
+        """
+        mode = _check_extrapolate(self.extrapolate if extrapolate is None else extrapolate)
+        single = np.ndim(parameters) == 1
+        array = self.spec.check_parameters(parameters)
+        outside = self.spec.outside_box(array)
+        if mode == "raise" and outside.any():
+            self.spec.require_in_box(
+                array,
+                hint="; the surrogate would extrapolate (extrapolate='flag' or 'allow' "
+                "accepts that)",
+            )
+        feed = {self._input_name: array.astype(np.float32)}
+        backbones = self.session.run(None, feed)[0].astype(np.float64)
+        if single:
+            backbones, outside = backbones[0], outside[0]
+        return (backbones, outside) if mode == "flag" else backbones
+
+    def channel(
+        self, name: str, parameters: Any, *, extrapolate: Extrapolate | None = None
+    ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """One channel of :meth:`predict`: ``(n, n_levels)`` (or ``(n_levels,)``)."""
+        index = self.spec.channel_index(name)
+        result = self.predict(parameters, extrapolate=extrapolate)
+        if isinstance(result, tuple):
+            return result[0][..., index], result[1]
+        return result[..., index]
+
+    def amplitude_m(self, parameters: Any, **options: Any) -> np.ndarray | tuple:
+        """Response amplitude (m) per excitation level."""
+        return self.channel("amplitude_m", parameters, **options)
+
+    def frequency_hz(self, parameters: Any, **options: Any) -> np.ndarray | tuple:
+        """Backbone frequency (Hz) per excitation level."""
+        return self.channel("frequency_hz", parameters, **options)
+
+    def __repr__(self) -> str:
+        return (
+            f"SurrogateRuntime({self.source!r}, parameters={list(self.parameter_names)}, "
+            f"levels={self.spec.n_levels}, channels={list(self.channels)})"
+        )
+
+
+def _check_extrapolate(mode: str) -> Extrapolate:
+    if mode not in _EXTRAPOLATE:
+        raise ValueError(f"extrapolate must be one of {_EXTRAPOLATE}, got {mode!r}")
+    return mode  # type: ignore[return-value]
