@@ -1,7 +1,7 @@
 """The ``pm-joint`` command.
 
-Each subcommand is a small function taking the parsed arguments; bad input
-ends in a one-line reason on stderr and exit code 2.
+Each subcommand is a thin wrapper over one function of :mod:`pm_joint.pipeline`;
+bad input ends in a one-line reason on stderr and exit code 2.
 """
 
 from __future__ import annotations
@@ -12,6 +12,17 @@ from collections.abc import Sequence
 
 from identification.effects import CATALOGUE
 from identification.model import PRESETS, JointModel
+from identification.rig import RIG_PRESETS
+
+
+def _effect_list(text: str) -> list[str]:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    for name in names:
+        if name not in CATALOGUE:
+            raise argparse.ArgumentTypeError(
+                f"unknown effect {name!r}; the catalogue has: {', '.join(CATALOGUE)}"
+            )
+    return names
 
 
 def _cmd_effects(args: argparse.Namespace) -> None:
@@ -31,10 +42,37 @@ def _cmd_model(args: argparse.Namespace) -> None:
         print(f"wrote {args.out}")
 
 
+def _cmd_rig(args: argparse.Namespace) -> None:
+    from pm_joint.pipeline import write_rig_campaign
+
+    campaign = write_rig_campaign(
+        args.preset, args.out, assemblies=args.assemblies, runs=args.runs, seed=args.seed,
+        levels=args.levels,
+    )  # fmt: skip
+    print(f"wrote {len(campaign)} record(s) of rig preset {args.preset!r} to {args.out}")
+
+
+def _cmd_backbones(args: argparse.Namespace) -> None:
+    from pm_joint.pipeline import campaign_backbones
+
+    out = args.out or f"{args.dir.rstrip('/')}/backbones.csv"
+    backbones = campaign_backbones(args.dir, out, n_periods=args.periods)
+    print(f"extracted {len(backbones)} backbone(s) to {out}")
+
+
+def _cmd_identify(args: argparse.Namespace) -> None:
+    from pm_joint.pipeline import identify_campaign
+
+    result = identify_campaign(args.dir, args.effects, records=args.records, out=args.out)
+    print(result.summary())
+    print(result.model.equation())
+    print(f"wrote {args.out}")
+
+
 def _cmd_demo(args: argparse.Namespace) -> None:
     from pm_joint.demo import run_demo
 
-    run_demo(out=args.out)
+    run_demo(out=args.out, size=args.size)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -42,7 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="pm-joint",
         description="Stochastic model updating of nonlinear structural joints.",
     )
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("effects", help="list the effects catalogue")
     p.set_defaults(func=_cmd_effects)
@@ -54,8 +92,36 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="write the model as JSON here")
     p.set_defaults(func=_cmd_model)
 
+    p = sub.add_parser("rig", help="write a virtual test campaign in the TRC layout")
+    p.add_argument("preset", choices=sorted(RIG_PRESETS), help="rig preset")
+    p.add_argument("--out", required=True, help="campaign folder")
+    p.add_argument("--assemblies", type=int, default=5, help="assemblies (default 5)")
+    p.add_argument("--runs", type=int, default=1, help="runs per assembly (default 1)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--levels", type=int, default=10, help="excitation levels (default 10)")
+    p.set_defaults(func=_cmd_rig)
+
+    p = sub.add_parser("backbones", help="extract backbones from every record of a campaign")
+    p.add_argument("dir", help="campaign folder (TRC layout)")
+    p.add_argument("--out", help="CSV file (default DIR/backbones.csv)")
+    p.add_argument("--periods", type=int, default=70, help="periods per hold (default 70)")
+    p.set_defaults(func=_cmd_backbones)
+
+    p = sub.add_parser("identify", help="SINDy identification of a joint model")
+    p.add_argument("dir", help="campaign folder (TRC layout)")
+    p.add_argument(
+        "--effects", type=_effect_list, required=True, help="library: comma-separated effect names"
+    )
+    p.add_argument("--out", required=True, help="model JSON file")
+    p.add_argument("--records", type=int, default=3, help="records fitted jointly (default 3)")
+    p.set_defaults(func=_cmd_identify)
+
     p = sub.add_parser("demo", help="run the pipeline on the embedded default")
     p.add_argument("--out", default="demo_out", help="output folder (default: demo_out)")
+    p.add_argument(
+        "--size", choices=("full", "small"), default="full",
+        help="full: the paper-sized campaign; small: a quick check (default: full)",
+    )  # fmt: skip
     p.set_defaults(func=_cmd_demo)
     return parser
 
@@ -65,8 +131,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         args.func(args)
-    except (ValueError, FileNotFoundError) as exc:
-        print(f"pm-joint {args.command}: error: {exc}", file=sys.stderr)
+    except (ValueError, FileNotFoundError, NotADirectoryError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"pm-joint {args.command}: error: {reason}", file=sys.stderr)
         return 2
     return 0
 

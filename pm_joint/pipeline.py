@@ -1,0 +1,166 @@
+"""The pipeline stages, in the order of the science.
+
+records → backbones → SINDy model → analytical backbones → surrogate →
+updating → criticism → report. Each stage is one function that reads what
+earlier stages left on disk and writes its own artifacts; the ``pm-joint``
+subcommands and the demo call these and nothing else.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # stages write PNG files; no display is needed or wanted
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from identification import harmonic, pll
+from identification.backbone import Backbone, BackboneSet, extract_backbones
+from identification.model import JointModel
+from identification.records import Campaign
+from identification.rig import RIG_PRESETS, Rig
+from identification.sindy import PAPER_LIBRARY, Identification, identify, plot_validation
+
+__all__ = [
+    "analytical_backbones",
+    "campaign_backbones",
+    "identify_campaign",
+    "load_backbones",
+    "write_rig_campaign",
+]
+
+
+def write_rig_campaign(
+    preset: str,
+    out: str | os.PathLike,
+    *,
+    assemblies: int = 25,
+    runs: int = 1,
+    seed: int = 0,
+    levels: int = 10,
+    progress: bool = True,
+) -> Campaign:
+    """Write a virtual campaign of the rig preset ``preset`` in the TRC layout."""
+    if preset not in RIG_PRESETS:
+        raise ValueError(f"unknown rig preset {preset!r}; available: {', '.join(RIG_PRESETS)}")
+    rig = Rig.preset(preset, levels=levels)
+    return rig.write_campaign(out, assemblies=assemblies, runs=runs, seed=seed, progress=progress)
+
+
+def _campaign(folder: str | os.PathLike) -> Campaign:
+    campaign = Campaign(folder)
+    if len(campaign) == 0:
+        raise ValueError(f"{folder}: no phase-resonance records (ConfigN_PRT_...) found")
+    return campaign
+
+
+def campaign_backbones(
+    folder: str | os.PathLike,
+    out: str | os.PathLike | None = None,
+    *,
+    n_periods: int = 70,
+    progress: bool = True,
+) -> BackboneSet:
+    """Backbones of every record in a campaign folder; optionally saved as CSV (+ PNG)."""
+    backbones = extract_backbones(_campaign(folder), n_periods=n_periods, progress=progress)
+    if out is not None:
+        out = Path(out)
+        backbones.to_csv(out)
+        fig = Figure(figsize=(10, 4))
+        axes = fig.subplots(1, 2)
+        backbones.plot(axes)
+        fig.tight_layout()
+        fig.savefig(out.with_suffix(".png"), dpi=110)
+    return backbones
+
+
+def load_backbones(source: str | os.PathLike) -> BackboneSet:
+    """Backbones from a CSV written by :func:`campaign_backbones` or from a campaign folder."""
+    source = Path(source)
+    if source.is_dir():
+        return campaign_backbones(source, progress=False)
+    return BackboneSet.from_csv(source)
+
+
+def identify_campaign(
+    folder: str | os.PathLike,
+    effects: Sequence[str] = PAPER_LIBRARY,
+    *,
+    records: int = 3,
+    out: str | os.PathLike | None = None,
+    **options,
+) -> Identification:
+    """SINDy identification from the first ``records`` records of a campaign.
+
+    With ``out`` (a JSON path) the model is written there, with the velocity
+    and acceleration validation figures (the paper's Figs. 9–10) beside it.
+    """
+    campaign = _campaign(folder)
+    chosen = [campaign[i] for i in range(min(records, len(campaign)))]
+    result = identify(chosen, list(effects), **options)
+    if out is not None:
+        out = Path(out)
+        result.model.to_json(out)
+        from identification.sindy import record_kinematics, validate
+
+        validation = validate(result.model, record_kinematics(chosen[0]))
+        for channel in ("velocity", "acceleration"):
+            fig = Figure(figsize=(10, 7))
+            plot_validation(validation, fig.subplots(3, 1), channel=channel)
+            fig.tight_layout()
+            fig.savefig(out.with_name(f"{out.stem}_validation_{channel}.png"), dpi=100)
+    return result
+
+
+def analytical_backbones(
+    model: JointModel,
+    measured: BackboneSet,
+    out: str | os.PathLike | None = None,
+    *,
+    n_levels: int = 41,
+) -> dict[str, Backbone]:
+    """The model's backbone by multi-harmonic balance and by the PLL simulator.
+
+    Both span the measured amplitudes; with ``out`` (a PNG path) they are drawn
+    over the measured curves (the paper's Fig. 12).
+    """
+    low = min(b.amplitude_range_m[0] for b in measured)
+    high = max(b.amplitude_range_m[1] for b in measured)
+    amplitudes = np.geomspace(low, high, n_levels)
+    hb = harmonic.backbone(model, amplitudes, method="multi")
+    ok = hb.converged
+    curves = {
+        "harmonic balance": Backbone(
+            hb.amplitude_m[ok], hb.frequency_hz[ok], hb.damping_ratio[ok],
+            label="harmonic balance", source=model.name,
+        ),
+    }  # fmt: skip
+    levels = np.abs(hb.base_acceleration[ok])
+    result = pll.simulate_pll(model, np.geomspace(levels.min(), levels.max(), n_levels))
+    locked = result.locked
+    if locked.sum() >= 2:
+        curves["PLL"] = Backbone(
+            result.amplitude_m[locked], result.frequency_hz[locked],
+            result.damping_ratio[locked], excitation_level=result.level[locked],
+            label="PLL", source=model.name,
+        )  # fmt: skip
+    if out is not None:
+        fig = Figure(figsize=(10, 4))
+        ax_f, ax_d = fig.subplots(1, 2)
+        for b in measured:
+            ax_f.plot(b.amplitude_mm, b.frequency_hz, color="0.75", lw=0.8)
+            ax_d.plot(b.amplitude_mm, 100 * b.damping_ratio, color="0.75", lw=0.8)
+        for (label, b), style in zip(curves.items(), ("-", "o"), strict=False):
+            ax_f.plot(b.amplitude_mm, b.frequency_hz, style, label=label, ms=3)
+            ax_d.plot(b.amplitude_mm, 100 * b.damping_ratio, style, label=label, ms=3)
+        ax_f.set(xlabel="amplitude (mm)", ylabel="frequency (Hz)", title="measured (grey) vs model")
+        ax_d.set(xlabel="amplitude (mm)", ylabel="damping ratio (%)")
+        ax_f.legend()
+        fig.tight_layout()
+        fig.savefig(out, dpi=110)
+    return curves
