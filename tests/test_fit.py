@@ -1,0 +1,242 @@
+"""Fitting JointModel parameters to backbones: recovery of known truths, the
+linearised start, the likelihood, the scatter model, record harmonics, errors."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from identification.backbone import Backbone, BackboneSet, extract_backbone
+from identification.fit import (
+    NOISE_FLOOR,
+    HoldHarmonics,
+    evaluate,
+    extract_harmonics,
+    fit_backbones,
+    fit_data,
+    measurement_levels,
+)
+from identification.harmonic import backbone as harmonic_backbone
+from identification.model import JointModel
+from identification.records import Record, StepSchedule
+from identification.rig import trc_channels
+
+W0 = 2 * np.pi * 101.0
+K0 = W0**2
+AMPS = 1e-3 * np.geomspace(0.05, 2.0, 8)
+
+
+def linear(k_scale=1.0, zeta=0.003):
+    return JointModel({"linear_stiffness": K0 * k_scale, "viscous_damping": 2 * zeta * W0})
+
+
+def curves(models, amplitudes=AMPS, method="multi", noise_hz=0.0, noise_zeta=0.0, seed=0):
+    """Harmonic-balance backbones of the models with Gaussian noise, as measured curves."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i, m in enumerate(models):
+        hb = harmonic_backbone(m, amplitudes, method=method)
+        assert hb.converged.all()
+        out.append(
+            Backbone(
+                hb.amplitude_m,
+                hb.frequency_hz + noise_hz * rng.standard_normal(amplitudes.size),
+                hb.damping_ratio + noise_zeta * rng.standard_normal(amplitudes.size),
+                label=f"c{i}",
+            )
+        )
+    return BackboneSet(out)
+
+
+def test_duffing_population_is_recovered():
+    """Three assemblies (±0.5 % stiffness) of a Duffing joint, multi-harmonic truth, noise."""
+    truth = linear().with_effect("cubic_stiffness", 1.4e10)
+    models = [truth.replace(linear_stiffness=K0 * s) for s in (0.995, 1.0, 1.005)]
+    measured = curves(models, noise_hz=0.005, noise_zeta=2e-6)
+    result = fit_backbones(linear().with_effect("cubic_stiffness", 0.0), measured)
+    assert result.method == "single" and result.success
+    assert result.model.coefficient("cubic_stiffness") == pytest.approx(1.4e10, rel=0.02)
+    assert result.model.coefficient("linear_stiffness") == pytest.approx(K0, rel=1e-4)
+    assert result.model.coefficient("viscous_damping") == pytest.approx(2 * 0.003 * W0, rel=0.01)
+    # The mean residual (assembly offsets average out) is at the noise level.
+    assert result.frequency_rmse_hz < 0.01 and result.damping_rmse < 2e-6
+    assert result.n_parameters == 3 and result.n_residuals == 2 * 3 * AMPS.size
+
+
+def test_linearised_start_is_exact_for_single_harmonic_data():
+    """For data made by the single-harmonic balance the linear solve is the answer:
+    every coefficient is recovered from a start of zeros, friction and ω-dependent
+    damping terms included."""
+    truth = linear().with_parameters({}).with_effect("cubic_stiffness", -3e9)
+    truth = truth.with_effect("quadratic_damping", 4.0).with_effect("coulomb_friction", 0.2)
+    measured = curves([truth], method="single")
+    start = truth.with_parameters({e: 0.0 for e in truth.effects if e != "linear_stiffness"})
+    result = fit_backbones(start, measured, method="single")
+    for name, value in truth.parameters.items():
+        assert result.model.parameters[name] == pytest.approx(value, rel=1e-6), name
+
+
+def test_microslip_is_recovered_from_a_shape_scan():
+    """A new Jenkins element (coefficient 0) starts from the scan of its slip amplitude."""
+    k_t = 0.06 * K0
+    truth = JointModel(
+        {
+            "linear_stiffness": K0 - k_t,
+            "viscous_damping": 2 * 0.003 * W0,
+            "microslip": {"coefficient": 1.0, "k_t": k_t, "F_s": k_t * 2e-4},
+        }
+    )
+    measured = curves([truth], amplitudes=1e-3 * np.geomspace(0.05, 2.0, 12), noise_hz=0.002)
+    result = fit_backbones(linear().with_effect("microslip", 0.0), measured)
+    _, k_fit, f_fit = result.model.microslip_arrays()
+    assert result.model.coefficient("microslip") == 1.0  # fixed; k_t and F_s carry it
+    assert k_fit == pytest.approx(k_t, rel=0.05)
+    assert f_fit / k_fit == pytest.approx(2e-4, rel=0.05)
+    assert result.model.linear_stiffness == pytest.approx(K0, rel=1e-4)
+
+
+def harmonics_of(models, measured, noise=0.0, seed=0):
+    """Record-like harmonics of each curve from the multi-harmonic balance."""
+    rng = np.random.default_rng(seed)
+    out = {}
+    for m, curve in zip(models, measured, strict=True):
+        hb = harmonic_backbone(m, curve.amplitude_m, method="multi")
+        a = curve.amplitude_m[:, None]
+        relative = (hb.harmonics_cos_m[:, 2:4] - 1j * hb.harmonics_sin_m[:, 2:4]) / a
+        relative = relative + noise * (rng.standard_normal(relative.shape) + 0j)
+        out[curve.label] = HoldHarmonics(
+            curve.label, curve.amplitude_m, relative, np.full(relative.shape, 1e-6)
+        )
+    return out
+
+
+def test_quadratic_stiffness_hides_in_the_backbone_and_shows_in_the_harmonics():
+    """x² softens the backbone like −(5/6)k2²a²/ω0², which a refitted x³ absorbs
+    (Δk3 = −(10/9)k2²/ω0² at leading order); the second harmonic separates them."""
+    k2, k3 = -5e7, 1.4e10
+    truth = linear().with_effect("cubic_stiffness", k3).with_effect("quadratic_stiffness", k2)
+    small = 1e-3 * np.geomspace(0.02, 0.3, 8)  # leading order holds
+    measured = curves([truth], amplitudes=small)
+    cubic_only = fit_backbones(
+        linear().with_effect("cubic_stiffness", k3), measured, method="multi"
+    )
+    expected_shift = -(10 / 9) * k2**2 / K0
+    shift = cubic_only.model.coefficient("cubic_stiffness") - k3
+    assert shift == pytest.approx(expected_shift, rel=0.03)
+    # Over the full range, with the record harmonics, x² is recovered from a start of 0.
+    measured = curves([truth], noise_hz=0.002)
+    harmonics = harmonics_of([truth], measured, noise=1e-5)
+    start = linear().with_effect("cubic_stiffness", 1e10).with_effect("quadratic_stiffness", 0.0)
+    result = fit_backbones(start, measured, harmonics=harmonics)
+    assert result.method == "multi"
+    assert result.model.coefficient("quadratic_stiffness") == pytest.approx(k2, rel=0.01)
+    assert result.model.coefficient("cubic_stiffness") == pytest.approx(k3, rel=0.02)
+    assert result.harmonic_rmse < 1e-4
+
+
+def test_per_curve_fits_label_each_curve():
+    scales = (0.99, 1.0, 1.012)
+    models = [linear(s).with_effect("cubic_stiffness", 1e10 * s) for s in scales]
+    measured = curves(models, method="single")
+    results = fit_backbones(models[1], measured, per_curve=True, method="single")
+    assert [r.data.labels for r in results] == [("c0",), ("c1",), ("c2",)]
+    for s, r in zip(scales, results, strict=True):
+        assert r.model.coefficient("linear_stiffness") == pytest.approx(K0 * s, rel=1e-8)
+        assert r.model.coefficient("cubic_stiffness") == pytest.approx(1e10 * s, rel=1e-6)
+
+
+def test_loglik_and_information_criteria_are_gaussian():
+    models = [linear(s).with_effect("cubic_stiffness", 1e10) for s in (0.996, 1.004, 1.0)]
+    measured = curves(models, noise_hz=0.01, noise_zeta=1e-5, seed=3)
+    data = fit_data(measured)
+    result = evaluate(linear(), data, free=["linear_stiffness", "viscous_damping"])
+    expected = stats.norm.logpdf(data.values, result.predicted, data.sigma).sum()
+    assert result.loglik == pytest.approx(expected, rel=1e-12)
+    n = data.values.size
+    assert result.bic == pytest.approx(2 * np.log(n) - 2 * expected)
+    assert result.aic == pytest.approx(4 - 2 * expected)
+    # Frequency alone: half the residuals.
+    alone = evaluate(linear(), data, weights={"damping_ratio": 0.0})
+    assert alone.n_residuals == n // 2
+
+
+def test_scatter_at_levels_is_the_spread_across_curves():
+    """Curves measured at the same amplitudes: the level σ is their standard deviation
+    at each amplitude combined with the floor."""
+    models = [linear(s, zeta=z) for s, z in ((0.99, 0.003), (1.0, 0.0031), (1.01, 0.0029))]
+    measured = curves(models, method="single")
+    data = fit_data(measured)
+    np.testing.assert_allclose(data.levels_m, AMPS, rtol=1e-12)
+    spread_f = np.std([c.frequency_hz for c in measured], axis=0, ddof=1)
+    spread_z = np.std([c.damping_ratio for c in measured], axis=0, ddof=1)
+    np.testing.assert_allclose(
+        data.level_sigma[:, 0], np.hypot(spread_f, NOISE_FLOOR["frequency_hz"]), rtol=1e-9
+    )
+    np.testing.assert_allclose(
+        data.level_sigma[:, 1], np.hypot(spread_z, NOISE_FLOOR["damping_ratio"]), rtol=1e-9
+    )
+    mean, se = data.level_mean(data.values)
+    np.testing.assert_allclose(mean[:, 0], np.mean([c.frequency_hz for c in measured], axis=0))
+    np.testing.assert_allclose(se, data.level_sigma / np.sqrt(3))
+
+
+def synthetic_record(harmonics, amplitude=1e-3, f=101.0, noise=0.0, seconds=1.0, fs=10_000.0):
+    """A one-hold record whose relative displacement has known harmonics
+    ``{h: C_h - i S_h}`` (relative to the fundamental a cos θ), at an arbitrary phase."""
+    t = np.arange(int(seconds * fs)) / fs
+    theta = 2 * np.pi * f * t + 0.7
+    w = 2 * np.pi * f
+    v = -amplitude * w * np.sin(theta)
+    for h, q in harmonics.items():
+        c, s = amplitude * q.real, -amplitude * q.imag
+        v += h * w * (-c * np.sin(h * theta) + s * np.cos(h * theta))
+    base = -1e-3 * np.cos(theta)  # leads the relative velocity by 90°: phase resonance
+    data = trc_channels(t, v, base, np.full(t.size, f), theta, noise_m_s=noise,
+                        rng=np.random.default_rng(1))  # fmt: skip
+    steps = StepSchedule([t[0], t[-1]], [1.0, 1.0])
+    return Record(data, steps, "Config1_PRT_Assemb1")
+
+
+def test_extract_harmonics_finds_known_harmonics_and_their_error():
+    known = {2: 0.03 - 0.01j, 3: -0.004 + 0.002j}
+    record = synthetic_record(known)
+    h = extract_harmonics([record], n_periods=70)["Config1_PRT_Assemb1"]
+    assert h.amplitude_m[0] == pytest.approx(1e-3, rel=1e-9)
+    np.testing.assert_allclose(h.relative[0], [known[2], known[3]], atol=1e-9)
+    # Same window as the backbone point.
+    point = extract_backbone(record)
+    assert point.amplitude_m[0] == pytest.approx(h.amplitude_m[0], rel=1e-12)
+    # With sensor noise: the reported standard error is the least-squares one,
+    # σ_v √(2/N) / (h ω a) with σ_v² = σ² (1 + 1/2) (centre minus the mean of two bases).
+    noisy = extract_harmonics([synthetic_record(known, noise=1e-3)])["Config1_PRT_Assemb1"]
+    n = round(70 / 101.0 * 10_000)
+    w = 2 * np.pi * 101.0
+    expected = 1e-3 * np.sqrt(1.5) * np.sqrt(2 / n) / (np.array([2, 3]) * w * 1e-3)
+    np.testing.assert_allclose(noisy.standard_error[0], expected, rtol=0.1)
+    error = np.abs(noisy.relative[0] - [known[2], known[3]])
+    assert np.all(error < 5 * np.sqrt(2) * expected)
+
+
+def test_bad_input_is_named():
+    measured = curves([linear()], method="single")
+    with pytest.raises(ValueError, match="unknown parameter"):
+        fit_backbones(linear(), measured, free=["cubic_stiffness"])
+    model = linear().with_effect("microslip", 1.0, k_t=1e4, F_s=1.0)
+    with pytest.raises(ValueError, match="cannot all be free"):
+        fit_backbones(model, measured, free=["microslip", "microslip.k_t", "microslip.F_s"])
+    with pytest.raises(ValueError, match="unknown weight"):
+        fit_backbones(linear(), measured, weights={"phase": 1.0})
+    with pytest.raises(ValueError, match="shape_scan"):
+        fit_backbones(linear(), measured, shape_scan={"viscous_damping": [1.0]})
+    with pytest.raises(ValueError, match="unknown noise_floor"):
+        fit_data(measured, noise_floor={"frequency": 0.1})
+    harmonics = harmonics_of([linear()], measured)
+    with pytest.raises(ValueError, match="need method='multi'"):
+        fit_backbones(linear(), measured, harmonics=harmonics, method="single")
+    with pytest.raises(ValueError, match="no record harmonics for curve 'c0'"):
+        fit_data(measured, {"other": harmonics["c0"]})
+
+
+def test_too_sparse_data_is_refused():
+    sparse = curves([linear(), linear(1.01)], amplitudes=np.array([1e-4, 1e-3]), method="single")
+    with pytest.raises(ValueError, match="at least 3 are needed"):
+        measurement_levels(sparse)
