@@ -69,6 +69,39 @@ def _cmd_identify(args: argparse.Namespace) -> None:
     print(f"wrote {args.out}")
 
 
+def _cmd_criticize(args: argparse.Namespace) -> None:
+    from pm_joint.pipeline import criticize_campaign
+
+    crit = criticize_campaign(args.dir, args.model, args.out, rounds=args.rounds)
+    print(crit.summary())
+    print(f"wrote {args.out}/criticism.json")
+
+
+def _cmd_update(args: argparse.Namespace) -> None:
+    from pm_joint.pipeline import load_backbones, update_backbones
+
+    if args.forward == "surrogate" and not args.surrogate:
+        raise ValueError("--forward surrogate needs --surrogate SURROGATE_DIR")
+    if args.forward != "surrogate" and not args.model:
+        raise ValueError(f"--forward {args.forward} needs --model model.json")
+    model = JointModel.from_json(args.model) if args.model else None
+    update_backbones(
+        load_backbones(args.dir), model, args.out, forward=args.forward,
+        surrogate=args.surrogate, sampler=args.sampler, draws=args.draws, tune=args.tune,
+        chains=args.chains, seed=args.seed, report_dir=args.report,
+    )  # fmt: skip
+    print(f"wrote {args.out}")
+
+
+def _cmd_report(args: argparse.Namespace) -> None:
+    from pm_joint.pipeline import load_backbones, run_report
+
+    index = run_report(
+        load_backbones(args.dir), args.out, posterior=args.posterior, criticism=args.criticism
+    )
+    print(f"wrote {index}")
+
+
 def _cmd_demo(args: argparse.Namespace) -> None:
     from pm_joint.demo import run_demo
 
@@ -115,6 +148,38 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="model JSON file")
     p.add_argument("--records", type=int, default=3, help="records fitted jointly (default 3)")
     p.set_defaults(func=_cmd_identify)
+
+    p = sub.add_parser("criticize", help="where the model fails and which effect it lacks")
+    p.add_argument("dir", help="campaign folder (TRC layout)")
+    p.add_argument("--model", required=True, help="model JSON file")
+    p.add_argument("--out", required=True, help="report folder (criticism.json + figures)")
+    p.add_argument(
+        "--rounds", type=int, default=0, help="add the best proposed effect this many times"
+    )
+    p.set_defaults(func=_cmd_criticize)
+
+    p = sub.add_parser("update", help="stochastic updating of the model on measured backbones")
+    p.add_argument("dir", help="campaign folder (TRC layout) or a backbones CSV")
+    p.add_argument("--model", help="model JSON file (for --forward harmonic|pll)")
+    p.add_argument("--forward", choices=("surrogate", "harmonic", "pll"), default="surrogate")
+    p.add_argument("--surrogate", help="surrogate folder (for --forward surrogate)")
+    p.add_argument("--out", required=True, help="posterior netCDF file")
+    p.add_argument(
+        "--sampler", choices=("metropolis", "demetropolisz", "nuts"), default="metropolis"
+    )
+    p.add_argument("--draws", type=int, default=30_000, help="draws per chain (default 30000)")
+    p.add_argument("--tune", type=int, default=2_000, help="tuning steps (default 2000)")
+    p.add_argument("--chains", type=int, default=2, help="chains (default 2)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--report", help="also write the arviz report into this folder")
+    p.set_defaults(func=_cmd_update)
+
+    p = sub.add_parser("report", help="HTML report of a run")
+    p.add_argument("dir", help="campaign folder (TRC layout) or a backbones CSV")
+    p.add_argument("--posterior", help="posterior netCDF file of `pm-joint update`")
+    p.add_argument("--criticism", help="folder written by `pm-joint criticize`")
+    p.add_argument("--out", required=True, help="report folder (index.html)")
+    p.set_defaults(func=_cmd_report)
 
     p = sub.add_parser("demo", help="run the pipeline on the embedded default")
     p.add_argument("--out", default="demo_out", help="output folder (default: demo_out)")

@@ -16,7 +16,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import stats
 
-__all__ = ["CANDIDATES", "DistributionFit", "distances", "fit_best", "fit_family"]
+__all__ = [
+    "CANDIDATES",
+    "UNBOUNDED_CANDIDATES",
+    "DistributionFit",
+    "distances",
+    "fit_best",
+    "fit_family",
+]
 
 #: Candidate families: symmetric, skewed either way, heavy-tailed and bounded-below.
 CANDIDATES: tuple[str, ...] = (
@@ -30,6 +37,12 @@ CANDIDATES: tuple[str, ...] = (
     "weibull_min",
 )
 
+#: Families whose support is the whole real line. A likelihood built from a
+#: handful of curves must not put a hard edge where the smallest measured
+#: value happened to fall, which a fitted location of lognorm, gamma or
+#: weibull_min does.
+UNBOUNDED_CANDIDATES: tuple[str, ...] = ("norm", "logistic", "t", "gumbel_r", "gumbel_l")
+
 
 @dataclass(frozen=True)
 class DistributionFit:
@@ -40,6 +53,7 @@ class DistributionFit:
     loglik: float
     aic: float
     bic: float
+    aicc: float
 
     @property
     def dist(self) -> stats.rv_continuous:
@@ -53,6 +67,7 @@ class DistributionFit:
             "loglik": self.loglik,
             "aic": self.aic,
             "bic": self.bic,
+            "aicc": self.aicc,
         }
 
 
@@ -78,12 +93,16 @@ def fit_family(samples: ArrayLike, family: str) -> DistributionFit:
     k = len(params)
     if not np.isfinite(loglik):
         loglik = -np.inf
+    aic = 2 * k - 2 * loglik
+    # small-sample correction; undefined (inf) when there are too few samples for k
+    aicc = aic + 2 * k * (k + 1) / (x.size - k - 1) if x.size > k + 1 else np.inf
     return DistributionFit(
         family=family,
         params=tuple(float(p) for p in params),
         loglik=loglik,
-        aic=2 * k - 2 * loglik,
+        aic=aic,
         bic=k * np.log(x.size) - 2 * loglik,
+        aicc=aicc,
     )
 
 
@@ -101,13 +120,23 @@ def fit_best(
     candidates
         scipy.stats family names.
     criterion
-        ``"aic"`` or ``"bic"``.
+        ``"aic"``, ``"aicc"`` (small-sample corrected) or ``"bic"``.
+
+    Returns
+    -------
+    The fits ranked best first. With ``"aicc"`` and too few samples for every
+    candidate (AICc needs more samples than parameters + 1), the normal
+    distribution alone is returned: there is no evidence to choose a shape.
     """
-    if criterion not in ("aic", "bic"):
-        raise ValueError(f"criterion must be 'aic' or 'bic', got {criterion!r}")
+    if criterion not in ("aic", "aicc", "bic"):
+        raise ValueError(f"criterion must be 'aic', 'aicc' or 'bic', got {criterion!r}")
     x = _clean(samples, "fit_best")
-    fits = [fit_family(x, family) for family in candidates]
-    return sorted(fits, key=lambda f: getattr(f, criterion))
+    fits = sorted(
+        (fit_family(x, family) for family in candidates), key=lambda f: getattr(f, criterion)
+    )
+    if not np.isfinite(getattr(fits[0], criterion)):
+        return [fit_family(x, "norm")]
+    return fits
 
 
 def distances(a: ArrayLike, b: ArrayLike) -> dict[str, float]:

@@ -29,8 +29,10 @@ from identification.sindy import PAPER_LIBRARY, Identification, identify, plot_v
 __all__ = [
     "analytical_backbones",
     "campaign_backbones",
+    "criticize_campaign",
     "identify_campaign",
     "load_backbones",
+    "update_backbones",
     "write_rig_campaign",
 ]
 
@@ -164,3 +166,184 @@ def analytical_backbones(
         fig.tight_layout()
         fig.savefig(out, dpi=110)
     return curves
+
+
+def criticize_campaign(
+    folder: str | os.PathLike,
+    model: JointModel | str | os.PathLike,
+    out: str | os.PathLike,
+    *,
+    rounds: int = 0,
+    use_records: bool = True,
+):
+    """Criticize a model against a campaign; optionally add the best effect ``rounds`` times.
+
+    Writes ``criticism.json`` and figures to ``out`` (for the last round, whose
+    history holds every step) and returns the last :class:`Criticism`.
+    """
+    from pm_joint.criticism import criticize
+
+    if not isinstance(model, JointModel):
+        model = JointModel.from_json(model)
+    campaign = _campaign(folder)
+    records = list(campaign) if use_records else None
+    measured = extract_backbones(campaign) if records is None else None
+    crit = criticize(model, measured, records=records)
+    for _ in range(rounds):
+        proposals = crit.missing()
+        if not proposals:
+            break
+        crit = crit.add(proposals[0].effect)
+    crit.write(out)
+    return crit
+
+
+def update_backbones(
+    measured: BackboneSet,
+    model: JointModel | None,
+    out: str | os.PathLike,
+    *,
+    forward: str = "surrogate",
+    surrogate: str | os.PathLike | None = None,
+    names: Sequence[str] | None = None,
+    sampler: str = "metropolis",
+    draws: int = 30_000,
+    tune: int = 2_000,
+    chains: int = 2,
+    seed: int = 0,
+    report_dir: str | os.PathLike | None = None,
+):
+    """Stochastic updating on measured backbones; saves the posterior (netCDF).
+
+    With ``report_dir`` the arviz report (summary, pairs, correlation, trace,
+    predictive backbones, PDFs at low/mid/high amplitude) is written there.
+    Returns the DataTree.
+    """
+    from pm_joint.report import report
+    from pm_joint.updating import build_model, sample, save_posterior
+
+    pm_model = build_model(model, measured, forward=forward, surrogate=surrogate, names=names)
+    idata = sample(
+        pm_model, sampler=sampler, draws=draws, tune=tune, chains=chains, random_seed=seed
+    )
+    save_posterior(
+        idata, out, metadata={"forward": forward, "sampler": sampler, "surrogate": str(surrogate)}
+    )
+    if report_dir is not None:
+        report(idata, measured, out=report_dir, sampler=sampler)
+    return idata
+
+
+def posterior_sections(report_folder: str | os.PathLike, page_folder: str | os.PathLike):
+    """Report sections of an arviz report folder (written by :func:`pm_joint.report.report`)."""
+    import json
+
+    from pm_joint.html import Section
+
+    folder = Path(report_folder)
+    content = json.loads((folder / "report.json").read_text(encoding="utf-8"))
+    rel = Path(os.path.relpath(folder, page_folder))
+    files = [f for f in content["files"] if f.endswith(".png")]
+    summary_rows = [
+        {k: v for k, v in row.items() if k in ("variable", "index", "mean", "sd", "eti94_lb",
+                                                "eti94_ub", "ess_bulk", "r_hat")}
+        for row in content["summary"]
+    ]  # fmt: skip
+    pdf_rows = [
+        {
+            "level": level,
+            "amplitude_mm": entry.get("amplitude_mm"),
+            "measured_family": entry["measured_fit"]["family"],
+            "sampled_family": entry["sampled_fit"]["family"],
+            "ks_statistic": entry["distances"]["ks_statistic"],
+            "ks_pvalue": entry["distances"]["ks_pvalue"],
+            "wasserstein_hz": entry["distances"]["wasserstein"],
+        }
+        for level, entry in content["level_pdfs"].items()
+    ]
+    sampler = content.get("sampler", {})
+    return [
+        Section(
+            "Stochastic updating",
+            f"Sampler: {sampler.get('sampler')}, {sampler.get('draws')} draws × "
+            f"{sampler.get('chains')} chains; mean acceptance {sampler.get('acceptance_rate')}.",
+            tables=[("posterior summary", summary_rows)],
+            figures=[(str(rel / f), f.removesuffix(".png").replace("_", " ")) for f in files],
+            files=[(str(rel / "report.json"), "report.json")],
+        ),
+        Section(
+            "PDFs at low, mid and high amplitude",
+            "Measured against sampled frequencies, each with its best-fitting distribution "
+            "family (AIC) and the distances between them (the paper's Fig. 22).",
+            tables=[("per amplitude level", pdf_rows)],
+        ),
+    ]
+
+
+def criticism_section(folder: str | os.PathLike, page_folder: str | os.PathLike):
+    """Report section of a criticism folder (written by :meth:`Criticism.write`)."""
+    import json
+
+    from pm_joint.html import Section
+
+    folder = Path(folder)
+    content = json.loads((folder / "criticism.json").read_text(encoding="utf-8"))
+    rel = Path(os.path.relpath(folder, page_folder))
+    verdict = (
+        "Something significant is missing." if content["significant"]
+        else "Nothing significant missing."
+    )  # fmt: skip
+    fails = "; ".join(r.get("text", str(r)) for r in content.get("fails_at", [])) or "nowhere"
+    return Section(
+        "Model criticism",
+        f"{verdict} Where the model fails: {fails}.",
+        tables=[
+            ("ranked missing effects", content["ranking"]),
+            (
+                "error history",
+                [
+                    {k: v for k, v in step.items() if not isinstance(v, (list, dict))}
+                    for step in content.get("history", [])
+                ],
+            ),
+        ],
+        figures=[
+            (str(rel / "comparison.png"), "measured vs predicted, residual bands"),
+            (str(rel / "signatures.png"), "residual beside the top candidates' signatures"),
+            (str(rel / "history.png"), "the error along the loop"),
+        ],
+        files=[(str(rel / "criticism.json"), "criticism.json")],
+    )
+
+
+def run_report(
+    measured: BackboneSet,
+    out: str | os.PathLike,
+    *,
+    posterior: str | os.PathLike | None = None,
+    criticism: str | os.PathLike | None = None,
+) -> Path:
+    """HTML report of a run: measured backbones, the posterior and the criticism."""
+    from pm_joint.html import Section, write_index
+    from pm_joint.report import report
+    from pm_joint.updating import load_posterior
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    fig = Figure(figsize=(10, 4))
+    measured.plot(fig.subplots(1, 2))
+    fig.tight_layout()
+    fig.savefig(out / "backbones.png", dpi=110)
+    sections = [
+        Section(
+            "Measured backbones",
+            f"{len(measured)} backbones.",
+            figures=[("backbones.png", "frequency and damping against amplitude")],
+        )
+    ]
+    if posterior is not None:
+        report(load_posterior(posterior), measured, out=out / "posterior")
+        sections += posterior_sections(out / "posterior", out)
+    if criticism is not None:
+        sections.append(criticism_section(criticism, out))
+    return write_index(out, "pm-joint report", sections)

@@ -225,6 +225,11 @@ def level_pdfs(
         i = marks[level]
         column = sampled[:, i]
         finite = column[np.isfinite(column)]
+        if finite.size and np.ptp(finite) == 0:
+            raise ValueError(
+                f"{level} amplitude level: every posterior draw predicts the same frequency "
+                f"({finite[0]:.6g} Hz): the chains did not move; tune longer or narrow the priors"
+            )
         try:
             measured_fit = fit_best(measured[:, i], candidates)[0]
             sampled_fit = fit_best(_thin(finite, max_fit_samples), candidates)[0]
@@ -346,10 +351,13 @@ def plot_trace_rank(
 
     The rank plot uses at most :data:`RANK_DRAWS` evenly thinned draws per
     chain: its multi-chain uniformity test costs minutes at the paper's 30 000.
+    A single chain has no rank plot (ranks compare chains), only a trace.
     """
     out_dir = Path(out_dir)
     names = _var_names(idata, var_names)
     trace = az.plot_trace(idata, var_names=names, backend="matplotlib")
+    if _group(idata, "posterior").sizes["chain"] < 2:
+        return [_save_collection(trace, out_dir / "trace.png")]
     factor = -(-_group(idata, "posterior").sizes["draw"] // RANK_DRAWS)
     rank = az.plot_rank(
         idata, var_names=names, thin=factor > 1, stats={"thin": {"factor": factor}},
