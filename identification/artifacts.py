@@ -1,18 +1,47 @@
-"""Writing artifacts safely: atomic replacement and content hashes.
+"""Writing artifacts safely: atomic replacement, content hashes, provenance.
 
 Every file pm-joint produces (models, datasets, surrogates, posteriors) goes
 through these helpers so that an interrupted run never leaves a half-written
-file under the final name.
+file under the final name, and so that a reader can tell a file that was
+modified or corrupted after it was written (:func:`check_sha256`) and which
+versions wrote it (:func:`versions`).
+
+A hash over JSON content uses :func:`canonical_json`: sorted keys, no blanks,
+floats as Python writes them (shortest round-trip form), so the hash of the
+values read back from a file equals the hash written, whatever the file's
+indentation.
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
 import os
+import platform
 import tempfile
+from importlib import metadata
 from pathlib import Path
+from typing import Any
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "sha256_bytes", "sha256_file"]
+__all__ = [
+    "DEFAULT_PACKAGES",
+    "IntegrityError",
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "canonical_json",
+    "check_sha256",
+    "sha256_bytes",
+    "sha256_file",
+    "sha256_json",
+    "versions",
+]
+
+#: Distributions whose versions every artifact records.
+DEFAULT_PACKAGES = ("pm-joint", "numpy", "scipy")
+
+
+class IntegrityError(ValueError):
+    """An artifact's content does not match the hash recorded with it."""
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
@@ -49,3 +78,59 @@ def sha256_file(path: str | Path) -> str:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
             digest.update(chunk)
     return digest.hexdigest()
+
+
+def canonical_json(value: Any) -> bytes:
+    """UTF-8 JSON of ``value`` with sorted keys and no blanks (the form that is hashed).
+
+    NaN and infinities are refused (ValueError): they have no JSON form.
+    """
+    text = json.dumps(
+        value, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False
+    )
+    return text.encode("utf-8")
+
+
+def sha256_json(value: Any) -> str:
+    """Hex SHA-256 of :func:`canonical_json` of ``value``."""
+    return sha256_bytes(canonical_json(value))
+
+
+def check_sha256(
+    expected: str, actual: str, source: str | Path, what: str = "the content", hint: str = ""
+) -> None:
+    """Raise :class:`IntegrityError` (a ValueError) unless the two hashes agree.
+
+    Parameters
+    ----------
+    expected
+        The hash recorded in the artifact.
+    actual
+        The hash of what was read.
+    source
+        The file, named in the message.
+    what
+        What was hashed (``"the terms"``, ``"the ONNX graph"``), named in the message.
+    hint
+        Appended to the message (what the user can do).
+    """
+    if expected != actual:
+        raise IntegrityError(
+            f"{source}: hash mismatch: {what} has SHA-256 {actual}, the file records "
+            f"{expected}; it was modified or corrupted after it was written{hint}"
+        )
+
+
+def versions(*packages: str) -> dict[str, str | None]:
+    """Versions of Python and of the installed distributions (None where not installed).
+
+    With no arguments, those of :data:`DEFAULT_PACKAGES`; names are distribution
+    names as pip knows them (``"pm-joint"``, ``"onnxruntime"``).
+    """
+    found: dict[str, str | None] = {"python": platform.python_version()}
+    for package in packages or DEFAULT_PACKAGES:
+        try:
+            found[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            found[package] = None
+    return found

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from identification.artifacts import atomic_write_text
+from identification.artifacts import atomic_write_text, check_sha256, sha256_json, versions
 from identification.effects import (
     CATALOGUE,
     get_effect,
@@ -264,28 +264,50 @@ class JointModel:
         return hash(tuple((t.effect, t.coefficient, tuple(t.shape.items())) for t in self.terms))
 
     # -------------------------------------------------------------------- JSON
+    def _terms_json(self) -> list[dict[str, Any]]:
+        return [
+            {"effect": t.effect, "coefficient": t.coefficient, "shape": dict(t.shape)}
+            for t in self.terms
+        ]
+
+    @property
+    def content_sha256(self) -> str:
+        """SHA-256 of the canonical JSON of the terms (effects, coefficients, shapes)."""
+        return sha256_json(self._terms_json())
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready description (see :meth:`from_dict`)."""
+        """JSON-ready description (see :meth:`from_dict`), with :attr:`content_sha256`."""
         return {
             "format": FORMAT,
             "version": FORMAT_VERSION,
             "name": self.name,
             "equation": self.equation(),
-            "terms": [
-                {"effect": t.effect, "coefficient": t.coefficient, "shape": dict(t.shape)}
-                for t in self.terms
-            ],
+            "terms": self._terms_json(),
+            "content_sha256": self.content_sha256,
         }
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], source: str = "model") -> JointModel:
-        """Build a model from :meth:`to_dict` output; ValueError naming what is wrong."""
+        """Build a model from :meth:`to_dict` output; ValueError naming what is wrong.
+
+        When ``data`` has a ``content_sha256`` it must match the terms read
+        (:class:`~identification.artifacts.IntegrityError` otherwise); data
+        without one (files written before it existed) are accepted.
+        """
         if not isinstance(data, Mapping):
             raise ValueError(f"{source}: expected a JSON object, got {type(data).__name__}")
         if data.get("format", FORMAT) != FORMAT:
             raise ValueError(f"{source}: not a JointModel file (format {data.get('format')!r})")
+        version = data.get("version", FORMAT_VERSION)
+        if not isinstance(version, int) or version > FORMAT_VERSION:
+            raise ValueError(
+                f"{source}: format version {version!r} is not one this pm-joint reads "
+                f"(up to {FORMAT_VERSION})"
+            )
         if "terms" not in data:
             raise ValueError(f"{source}: missing field 'terms'")
+        if not isinstance(data["terms"], list):
+            raise ValueError(f"{source}: field 'terms' must be a list of objects")
         terms = []
         for i, entry in enumerate(data["terms"]):
             where = f"{source}: terms[{i}]"
@@ -294,24 +316,39 @@ class JointModel:
             for key in ("effect", "coefficient"):
                 if key not in entry:
                     raise ValueError(f"{where}: missing field {key!r}")
+            shape = entry.get("shape", {})
+            if not isinstance(shape, Mapping):
+                raise ValueError(f"{where}: field 'shape' must be an object of shape values")
             try:
                 coefficient = float(entry["coefficient"])
-                terms.append(Term(entry["effect"], coefficient, dict(entry.get("shape", {}))))
+                terms.append(Term(entry["effect"], coefficient, dict(shape)))
             except (TypeError, ValueError) as exc:
                 raise ValueError(f"{where} ({entry.get('effect')!r}): {exc}") from None
-        return cls(terms, name=str(data.get("name", "")))
+        model = cls(terms, name=str(data.get("name", "")))
+        if "content_sha256" in data:
+            check_sha256(
+                data["content_sha256"],
+                model.content_sha256,
+                source,
+                "the terms",
+                hint=" (remove 'content_sha256' to accept a deliberate edit)",
+            )
+        return model
 
     def to_json(self, path: str | Path) -> Path:
-        """Write the model as JSON (atomically)."""
-        return atomic_write_text(path, json.dumps(self.to_dict(), indent=2, ensure_ascii=False))
+        """Write the model as JSON (atomically), with its hash and the versions writing it."""
+        data = {**self.to_dict(), "versions": versions()}
+        return atomic_write_text(path, json.dumps(data, indent=2, ensure_ascii=False) + "\n")
 
     @classmethod
     def from_json(cls, path: str | Path) -> JointModel:
-        """Read a model written by :meth:`to_json`."""
+        """Read a model written by :meth:`to_json`; ValueError naming the file if it is bad."""
         path = Path(path)
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
+        except OSError as exc:
+            raise ValueError(f"{path}: cannot read the model file ({exc.strerror})") from None
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise ValueError(f"{path}: not valid JSON ({exc})") from None
         return cls.from_dict(data, source=str(path))
 
