@@ -1,15 +1,19 @@
-"""Time SINDy identification from 60 s of 10 kHz records with the full library.
+"""Time SINDy identification from 60 s of 10 kHz phase-resonance records.
 
-Data: the ``pandey2025`` preset driven by six 10 s linear sine sweeps of the
-base acceleration around its resonance at rising levels (0.1–1.3 mm response),
-simulated with :func:`identification.pll.simulate_base_excitation`, white
-noise of 1e-4 m/s RMS on both velocity channels. Timed: ``identify_arrays``
-(preprocessing, library, offset reconstruction, cross-validated threshold)
-with the paper's library, then with ``microslip`` at a fixed shape added.
-Each case runs once untimed (numba compilation) and is then timed ``--repeat`` times
-(best kept). Target: ≤ 10 s per identification. Also printed: the worst relative
-error of the true terms whose peak share of the restoring force exceeds 1 %
-(target ≤ 10 %).
+Data: what the virtual rig (:class:`identification.rig.Rig`) records of the
+``pandey2025`` preset: the PLL simulator holds phase resonance at 10 levels
+stepped geometrically over 0.1–1 mm (0.1 s ramps, 2.9 s holds), two
+assemblies of 30 s each, vibrometer noise of 1e-4 m/s RMS on the 17 velocity
+channels. That is the data the identification meets in use (the TRC test
+layout), rather than open-loop sine sweeps. Timed: :func:`identify`
+(preprocessing, library, offset reconstruction, both threshold paths,
+cross-validation, admissibility, backward elimination) with the paper's
+library, then with the whole catalogue (``microslip`` at a fixed shape added).
+Each case runs once untimed (numba compilation) and is then timed
+``--repeat`` times (best kept). Target: ≤ 10 s per identification. Also
+printed: the worst relative error of the true terms whose peak share of the
+restoring force exceeds 1 % (target ≤ 10 %) and the worst relative frequency
+error of the identified multi-harmonic backbone (target ≤ 0.3 %).
 
 Run: ``.venv/bin/python bench/identify.py``
 """
@@ -23,48 +27,41 @@ import warnings
 
 import numpy as np
 
+from identification import harmonic
 from identification.effects import CATALOGUE
 from identification.model import JointModel
-from identification.pll import simulate_base_excitation
-from identification.sindy import PAPER_LIBRARY, CollinearityWarning, identify_arrays
+from identification.records import record_name
+from identification.rig import Rig
+from identification.sindy import (
+    PAPER_LIBRARY,
+    CollinearityWarning,
+    identify,
+    record_kinematics,
+)
 
-SAMPLING_RATE_HZ = 10_000.0
-RECORD_S = 10.0
-LEVELS_M_S2 = (1.0, 2.0, 4.0, 6.0, 9.0, 12.0)  # base-acceleration amplitudes
-NOISE_M_S = 1e-4
+AMPLITUDES_M = 1e-3 * np.geomspace(0.1, 1.0, 10)
+HOLD_S = 2.9  # with the 0.1 s ramp: 30 s per record
+ASSEMBLIES = 2
 TARGET_S = 10.0
+TARGET_ERROR = 0.10
+TARGET_BACKBONE = 0.003
 
 
-def sweep_records(model: JointModel, seed: int = 0):
-    """Sweeps at each level: ``[(t, response v, base v, frequency)]`` and the true ``(x, v)``."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(0.0, RECORD_S, 1.0 / SAMPLING_RATE_HZ)
-    f_lin = model.linear_frequency_hz
-    records, states = [], []
-    for level in LEVELS_M_S2:
-        f0, f1 = 0.9 * f_lin, 1.05 * f_lin
-        rate = (f1 - f0) / RECORD_S
-        frequency = f0 + rate * t
-        omega = 2 * np.pi * frequency
-        phase = 2 * np.pi * (f0 * t + 0.5 * rate * t**2)
-        # Base velocity −A/ω cos φ, so the base acceleration is its exact derivative.
-        base_velocity = -level / omega * np.cos(phase)
-        base_acceleration = level * np.sin(phase) + level * 2 * np.pi * rate / omega**2 * np.cos(
-            phase
-        )
-        x, v, _ = simulate_base_excitation(model, t, base_acceleration)
-        states.append((x, v))
-        records.append((
-            t,
-            v + NOISE_M_S * rng.standard_normal(t.size),
-            base_velocity + NOISE_M_S * rng.standard_normal(t.size),
-            frequency,
-        ))  # fmt: skip
-    return records, states
+def rig_records(truth: JointModel):
+    """Two virtual-rig records of ``truth`` (what ``Rig.write_campaign`` writes, in memory)."""
+    rig = Rig.for_amplitudes(truth, AMPLITUDES_M, hold_s=HOLD_S)
+    return [
+        rig.simulate(truth, rig.shaker_gain, np.random.default_rng([0, a]), record_name(1, a))
+        for a in range(1, ASSEMBLIES + 1)
+    ]
 
 
-def worst_error(model: JointModel, truth: JointModel, states) -> float:
+def worst_error(model: JointModel, truth: JointModel, records) -> float:
     """Largest relative coefficient error over the true terms with a peak share above 1 %."""
+    states = []
+    for record in records:
+        kin = record_kinematics(record)
+        states.append((kin.displacement[kin.valid], kin.velocity[kin.valid]))
     total = max(np.max(np.abs(truth.restoring_force(x, v))) for x, v in states)
     worst = 0.0
     for term in truth.terms:
@@ -75,14 +72,20 @@ def worst_error(model: JointModel, truth: JointModel, states) -> float:
     return worst
 
 
+def backbone_error(model: JointModel, truth: JointModel) -> float:
+    """Largest relative frequency error of the multi-harmonic backbone over the test range."""
+    identified = harmonic.backbone(model, AMPLITUDES_M, method="multi").frequency_hz
+    reference = harmonic.backbone(truth, AMPLITUDES_M, method="multi").frequency_hz
+    return float(np.max(np.abs(identified / reference - 1)))
+
+
 def time_identification(records, effects, shapes, repeat: int) -> tuple[float, object]:
-    columns = [list(c) for c in zip(*records, strict=True)]
     best, result = np.inf, None
     for i in range(repeat + 1):
         start = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", CollinearityWarning)
-            result = identify_arrays(*columns, effects, shapes=shapes)
+            result = identify(records, effects, shapes=shapes)
         if i:  # the first run compiles numba kernels
             best = min(best, time.perf_counter() - start)
     return best, result
@@ -94,32 +97,33 @@ def main() -> None:
     args = parser.parse_args()
 
     truth = JointModel.preset("pandey2025")
-    records, states = sweep_records(truth)
-    peak_m = max(np.max(np.abs(x)) for x, _ in states)
-    samples = sum(r[0].size for r in records)
+    records = rig_records(truth)
+    samples = sum(r.time_s.size for r in records)
+    duration = sum(r.time_s[-1] - r.time_s[0] + 1 / r.sampling_rate_hz for r in records)
     cases = {
         "paper_library": (list(PAPER_LIBRARY), None),
-        "paper_library_microslip": (
-            [*PAPER_LIBRARY, "microslip"],
-            {"microslip": {"k_t": 1e5, "F_s": 20.0}},
-        ),
+        "full_library": (list(CATALOGUE), {"microslip": {"k_t": 1e5, "F_s": 20.0}}),
     }
-    figures = {"record_s": RECORD_S * len(records), "samples": samples}
-    print(f"data: {len(records)} records, {samples} samples at {SAMPLING_RATE_HZ:g} Hz, "
-          f"noise {NOISE_M_S:g} m/s RMS, largest response {peak_m * 1e3:.2f} mm")  # fmt: skip
-    print(f"{'library':<28}{'terms':>6}{'kept':>6}{'time (s)':>10}{'target (s)':>12}{'R²':>12}"
-          f"{'worst error':>13}")  # fmt: skip
+    figures = {"record_s": round(duration, 3), "samples": samples}
+    print(f"data: {len(records)} virtual-rig records (pandey2025 under the PLL), {duration:.1f} s, "
+          f"{samples} samples at {records[0].sampling_rate_hz:g} Hz, noise 1e-4 m/s RMS, "
+          f"{AMPLITUDES_M[0] * 1e3:.1f}–{AMPLITUDES_M[-1] * 1e3:.1f} mm")  # fmt: skip
+    print(f"{'library':<16}{'terms':>6}{'kept':>6}{'time (s)':>10}{'target (s)':>12}"
+          f"{'worst error':>13}{'backbone':>10}")  # fmt: skip
     for name, (effects, shapes) in cases.items():
         seconds, result = time_identification(records, effects, shapes, args.repeat)
         kept = len(result.model.terms)
-        error = worst_error(result.model, truth, states)
-        print(f"{name:<28}{len(effects):>6}{kept:>6}{seconds:>10.2f}{TARGET_S:>12.1f}"
-              f"{result.r2:>12.8f}{error:>13.2%}")  # fmt: skip
+        error = worst_error(result.model, truth, records)
+        frequency = backbone_error(result.model, truth)
+        print(f"{name:<16}{len(effects):>6}{kept:>6}{seconds:>10.2f}{TARGET_S:>12.1f}"
+              f"{error:>13.2%}{frequency:>10.3%}")  # fmt: skip
         figures[f"{name}_s"] = round(seconds, 3)
         figures[f"{name}_terms_kept"] = kept
         figures[f"{name}_worst_error_pct"] = round(100 * error, 2)
+        figures[f"{name}_backbone_error_pct"] = round(100 * frequency, 4)
     figures["target_s"] = TARGET_S
-    figures["target_worst_error_pct"] = 10.0
+    figures["target_worst_error_pct"] = 100 * TARGET_ERROR
+    figures["target_backbone_error_pct"] = 100 * TARGET_BACKBONE
     print(json.dumps(figures))
 
 

@@ -23,6 +23,7 @@ from scipy import integrate, signal
 
 __all__ = [
     "Kinematics",
+    "amplitude_envelope",
     "bandpass",
     "central_difference",
     "displacement_from_velocity",
@@ -141,6 +142,20 @@ def lowpass(
         )
     sos = signal.butter(order, cutoff_hz, btype="lowpass", fs=sampling_rate_hz, output="sos")
     return signal.sosfiltfilt(sos, np.asarray(values, dtype=float), axis=axis)
+
+
+def amplitude_envelope(
+    values: ArrayLike, sampling_rate_hz: float, cutoff_hz: float, *, axis: int = 0
+) -> np.ndarray:
+    """Slowly varying amplitude of an oscillating signal: ``sqrt(2 · lowpass(values²))``.
+
+    Exact for a sinusoid of constant amplitude (its square has mean ``a²/2``)
+    once ``cutoff_hz`` is well below twice its frequency; the zero-phase
+    low-pass keeps the envelope aligned with the signal.
+    """
+    squared = lowpass(np.square(np.asarray(values, dtype=float)), sampling_rate_hz, cutoff_hz,
+                      axis=axis)  # fmt: skip
+    return np.sqrt(2 * np.clip(squared, 0.0, None))
 
 
 def central_difference(values: ArrayLike, sampling_rate_hz: float, *, axis: int = 0) -> np.ndarray:

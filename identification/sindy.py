@@ -28,24 +28,60 @@ Why it is built this way:
   ``c₃`` the cubic one and ``k`` the linear stiffness: −11 % for a 3 % cubic
   frequency shift). After each fit the slow offset implied by the model's
   quasi-static balance is added back to the displacement and the fit repeated
-  (``offset_iterations``); the iterate with the lowest cross-validated error is
-  kept.
-* **Scaling.** Columns and target are divided by their maxima (the paper's
-  scaling, applied per column so that non-polynomial features scale too). A
-  normalised coefficient ``ξ_i = c_i max|φ_i| / max|y|`` is then the peak share
-  of term ``i`` in the force, and the STLSQ threshold is a peak share as well.
-* **Threshold.** ``"cv"`` (default): K-fold cross-validation over contiguous
-  time blocks (one block of every record per fold), and the sparsest threshold
-  whose held-out error is within one standard error of the best (the
-  one-standard-error rule). ``"bic"``: Bayesian information criterion along the
-  threshold path with the effective number of independent samples
-  ``2 · bandwidth · duration`` (consecutive samples of a band-limited residual
-  are not independent). Thresholds below ``min_threshold`` (default 1e-3, the
-  accuracy of the band-pass and of the differentiation) are not tried: terms
-  below that share cannot be told from preprocessing error.
+  with the same support (``offset_iterations``); the iterate with the lowest
+  cross-validated error is kept and its support chosen again.
+* **Data.** Whole records, ramps and PLL transients included: the equation of
+  motion holds at every instant, not only in steady state, so no sample needs
+  to be thrown away; only ``edge_periods`` periods at each end, where the
+  zero-phase filters ring, are left out. As in the paper, the acceleration
+  comes from the velocity channel by central differences and the
+  displacement by the trapezoidal rule (:func:`~identification.signals.kinematics`);
+  both are zero-phase, so their small gain errors (``(ωh)²/6`` and
+  ``(ωh)²/12``, 7e-4 and 3e-4 at 100 Hz and 10 kHz) act on the stiffness and
+  never leak into the damping. Several records (assemblies, runs) are fitted
+  jointly: the model is then their population model.
+* **Two groups, two thresholds.** Columns are divided by their maxima (the
+  paper's scaling, applied per column so that non-polynomial features scale
+  too) and then measured against their group's force: conservative columns
+  (even in ``ẋ``; the Jenkins element, a stiffness with hysteresis) against
+  the restoring force, dissipative columns (odd in ``ẋ``) against the
+  dissipative force (:data:`GROUPS`). The normalised coefficient
+  ``ξ_i = c_i max|φ_i| / max|f_group|`` is the term's share of its group's
+  force and each group has its own STLSQ threshold. A single share of the
+  total force cannot work for resonance data: at phase resonance the
+  dissipative force balances the excitation, ``2ζ`` of the restoring force
+  (0.5–2 %), so viscous damping, structurally essential, ranks with the
+  spurious terms and is dropped, while dissipative terms that are spurious
+  can carry more of their group than true stiffness terms carry of theirs.
+* **Candidates.** Each group's threshold is raised from ``min_threshold``
+  (default 1e-3 of the group's force) to just above its weakest kept term,
+  STLSQ restarting from the previous support, until the group is empty; the
+  candidates are all combinations of the two groups' supports. Backward
+  elimination (drop the term whose removal scores best) from the selected and
+  from the best candidate adds the supports that thresholds cannot reach,
+  where nearly collinear columns have their shares in the wrong order.
+* **Selection.** ``"cv"`` (default): K-fold cross-validation of each
+  candidate support, refitted on the training folds. Folds are dealt blocks of
+  :data:`CV_BLOCK_PERIODS` periods from every record in turn, so each fold
+  spans every excitation level; contiguous fifths of a stepped-level record
+  would hold out whole levels, and the held-out error would measure
+  extrapolation to amplitudes no training block has seen (on the trc-like rig
+  records this made the two-term, undamped model "best"). The model is the
+  candidate with the fewest terms within one standard error of the best
+  (the one-standard-error rule). ``"bic"``: Bayesian information criterion
+  with the effective number of independent samples ``2 · bandwidth ·
+  duration`` (consecutive samples of a band-limited residual are not
+  independent); it takes the residual for noise, so on noise-free simulations
+  it keeps small terms that fit preprocessing error.
+* **Admissibility.** A resonance test measures positive damping at every
+  level (the shaker feeds power in). Only candidates whose single-harmonic
+  backbone exists with positive damping over the tested amplitudes
+  (:func:`admissible`) compete; a model without damping, or one whose damping
+  turns negative at small amplitudes, cannot be run under a phase-locked loop
+  however small its regression error.
 * **Fast.** Regressions on any subset of columns only need the Gram matrix, so
   every time block is reduced once to the Gram matrix of its ``[Θ | y]``, and
-  the threshold path and cross-validation run on those small matrices.
+  the threshold paths and cross-validation run on those small matrices.
 
 Terms that data of this kind cannot tell apart are reported, not hidden:
 ``x²`` and ``ẋ²`` act only through the second harmonic, with a ratio ``−ω²``
@@ -64,7 +100,7 @@ from __future__ import annotations
 import itertools
 import math
 import warnings
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
@@ -78,15 +114,16 @@ from identification.effects import CATALOGUE, get_effect
 from identification.model import JointModel, Term
 from identification.signals import (
     Kinematics,
+    amplitude_envelope,
     bandpass,
     kinematics,
     lowpass,
-    scale_by_maximum,
     unscale_coefficients,
 )
 
 __all__ = [
     "EQ3_SYMBOLS",
+    "GROUPS",
     "PAPER_LIBRARY",
     "POLYNOMIAL_LIBRARY",
     "CollinearityWarning",
@@ -96,6 +133,7 @@ __all__ = [
     "RankDeficientLibraryError",
     "ThresholdPath",
     "Validation",
+    "admissible",
     "backbone_error",
     "comparison_table",
     "design_matrix",
@@ -135,6 +173,12 @@ EQ3_SYMBOLS: dict[str, str] = {
 
 #: |r| between two library columns above which a :class:`CollinearityWarning` is given.
 COLLINEARITY_WARNING = 0.99
+#: The two groups of library columns, each thresholded against its own force.
+GROUPS = ("conservative", "dissipative")
+#: Length of the cross-validation blocks, in periods of the band's lower edge.
+CV_BLOCK_PERIODS = 20
+#: Smallest group force (fraction of max|y|) a group share is measured against.
+GROUP_FLOOR = 1e-3
 #: Condition number of the scaled library above which it counts as rank-deficient (the
 #: Gram matrix resolves condition numbers up to about 1e8 in double precision).
 RANK_DEFICIENT = 1e7
@@ -260,19 +304,50 @@ def mean_offset(model: JointModel, kin: Kinematics, iterations: int = 3) -> np.n
 # Any least-squares fit on a subset of the columns of [Θ | y] needs only the Gram
 # matrix G = [Θ | y]ᵀ[Θ | y] (size n_terms + 1): a square R with RᵀR = G gives
 # the same solutions and residuals as the rows themselves. Every time block is
-# reduced to its Gram once (one BLAS product), and the threshold path, the
+# reduced to its Gram once (one BLAS product), and the threshold paths, the
 # cross-validation and STLSQ run on these small matrices.
 
 
 @dataclass(frozen=True, eq=False)
 class ThresholdPath:
-    """Scores along the STLSQ threshold path (thresholds are peak shares, ascending)."""
+    """Candidate models along the two STLSQ threshold paths, and their scores.
+
+    Conservative and dissipative columns each have their own threshold
+    (:data:`GROUPS`, shares of the group's force); the candidates are the
+    combinations of the distinct supports found along both paths.
+
+    Attributes
+    ----------
+    thresholds
+        ``(n, 2)`` conservative and dissipative threshold of each candidate
+        (NaN for a group the library lacks).
+    n_terms
+        Terms each candidate keeps.
+    score
+        Held-out mean squared error (``"cv"``, scaled units) or BIC (``"bic"``).
+    score_se
+        Standard error of the held-out error across folds (``"cv"``), else None.
+    criterion
+        ``"cv"`` or ``"bic"``.
+    admissible
+        Whether the candidate has a backbone with positive damping over the
+        tested amplitudes (:func:`admissible`).
+    chosen
+        Index of the selected candidate.
+    pruned
+        Terms of the selected candidate that the model does not keep: backward
+        elimination (from it and from the best-scoring candidate) removed them
+        within the same score limit.
+    """
 
     thresholds: np.ndarray
     n_terms: np.ndarray
     score: np.ndarray
     score_se: np.ndarray | None
     criterion: str
+    admissible: np.ndarray
+    chosen: int
+    pruned: tuple[str, ...]
 
 
 def _factor(gram: np.ndarray) -> np.ndarray:
@@ -290,46 +365,110 @@ def _rss(gram: np.ndarray, xi: np.ndarray) -> float:
     return float(z @ gram @ z)
 
 
-def _stlsq(factor: np.ndarray, threshold: float) -> np.ndarray:
-    """Sequentially thresholded least squares (pysindy) on a Gram factor."""
-    a, b = factor[:, :-1], factor[:, -1]
-    if threshold == 0:
-        return np.linalg.lstsq(a, b, rcond=None)[0]
-    # Negligible ridge; pysindy's unbias step refits the support without it.
-    optimizer = ps.STLSQ(threshold=threshold, alpha=1e-12 * np.sum(a * a), max_iter=50)
-    with warnings.catch_warnings():
-        # All terms below the threshold is a legitimate end of the path.
-        warnings.filterwarnings("ignore", message="Sparsity parameter is too big")
-        optimizer.fit(a, b)
-    return optimizer.coef_[0]
+def _least_squares(factor: np.ndarray, support: np.ndarray | None = None) -> np.ndarray:
+    """Least-squares coefficients on the columns in ``support`` (all by default), 0 elsewhere."""
+    xi = np.zeros(factor.shape[1] - 1)
+    columns = np.arange(xi.size) if support is None else np.flatnonzero(support)
+    if columns.size:
+        xi[columns] = np.linalg.lstsq(factor[:, columns], factor[:, -1], rcond=None)[0]
+    return xi
 
 
-def _threshold_path(factor: np.ndarray, min_threshold: float, n_path: int) -> np.ndarray:
-    """One threshold per distinct support along a geometric sweep, ascending.
+def _stlsq_optimizer(a: np.ndarray, thresholds: np.ndarray) -> tuple[ps.STLSQ, np.ndarray]:
+    """pysindy's STLSQ for one threshold per column, and the column factors it needs.
 
-    Thresholds from ``min_threshold`` to the largest least-squares coefficient
-    are swept; consecutive ones giving the same support on the whole data are
-    merged into their geometric mean, which sits safely inside that support's
-    range for the cross-validation folds too.
+    STLSQ takes one threshold: columns multiplied by ``ratio`` (their threshold
+    over the largest) have coefficients divided by it, so the largest
+    threshold on the scaled coefficients is each column's own threshold.
     """
-    top = np.max(np.abs(_stlsq(factor, 0.0)))
-    if top <= min_threshold:
-        return np.array([min_threshold])
-    sweep = np.geomspace(min_threshold, top, n_path)
-    supports = [tuple(_stlsq(factor, lam) != 0) for lam in sweep]
-    groups = [list(g) for _, g in itertools.groupby(range(n_path), key=lambda i: supports[i])]
-    return np.array([math.sqrt(sweep[g[0]] * sweep[g[-1]]) for g in groups])
+    top = float(np.max(thresholds))
+    ratio = thresholds / top if top > 0 else np.ones_like(thresholds)
+    scaled = a * ratio
+    # Negligible ridge; pysindy's unbias step refits the support without it.
+    return ps.STLSQ(threshold=top, alpha=1e-12 * np.sum(scaled * scaled), max_iter=50), ratio
+
+
+@contextmanager
+def _quiet_stlsq() -> Iterator[None]:
+    with warnings.catch_warnings():
+        # All terms below the threshold is a legitimate end of a path.
+        warnings.filterwarnings("ignore", message="Sparsity parameter is too big")
+        yield
+
+
+def _stlsq(
+    factor: np.ndarray, thresholds: np.ndarray, columns: np.ndarray | None = None
+) -> np.ndarray:
+    """Sequentially thresholded least squares (pysindy) on a Gram factor.
+
+    ``thresholds`` has one entry per column; only ``columns`` (a mask, all by
+    default) take part, the others get 0.
+    """
+    columns = np.ones(factor.shape[1] - 1, dtype=bool) if columns is None else columns
+    a, b = factor[:, :-1][:, columns], factor[:, -1]
+    optimizer, ratio = _stlsq_optimizer(a, thresholds[columns])
+    with _quiet_stlsq():
+        optimizer.fit(a * ratio, b)
+    xi = np.zeros(columns.size)
+    xi[columns] = optimizer.coef_[0] * ratio
+    return xi
+
+
+def _group_paths(
+    factor: np.ndarray, dissipative: np.ndarray, min_threshold: float
+) -> list[list[tuple[float, np.ndarray]]]:
+    """Per group (:data:`GROUPS`), the nested supports along its STLSQ threshold path.
+
+    The group's threshold starts at ``min_threshold`` and is raised each time
+    to just above the smallest coefficient the group keeps, until it keeps
+    none, while the other group's stays at ``min_threshold``. Each STLSQ
+    starts from the previous support, so every step drops the weakest term
+    (and any that fall below the threshold with it): sequential thresholding
+    itself, one fit per support. Restarting from the whole library instead,
+    or sweeping a fixed grid, steps over supports whose coefficients lie
+    close together. Returns ``(threshold, support within the group)`` pairs
+    with the threshold the geometric mean of the range giving that support,
+    ascending; a group the library lacks gives one pair ``(nan, no column)``.
+    """
+    paths = []
+    for members in (~dissipative, dissipative):
+        if not members.any():
+            paths.append([(math.nan, members)])
+            continue
+        steps: list[tuple[float, np.ndarray]] = []
+        lam, active = min_threshold, np.ones_like(members)
+        while True:
+            xi = _stlsq(factor, np.where(members, lam, min_threshold), active)
+            support = (xi != 0) & members
+            if steps and np.array_equal(support, steps[-1][1]):
+                # STLSQ's unbiased refit can leave a kept coefficient just below the
+                # threshold; step on geometrically then.
+                lam *= 1.05
+                continue
+            steps.append((lam, support))
+            if not support.any():
+                break
+            active = support | ~members
+            lam = max(lam, float(np.abs(xi[support]).min())) * (1 + 1e-6)
+        bounds = [lam for lam, _ in steps[1:]] + [steps[-1][0]]
+        paths.append([(math.sqrt(low * high), support)
+                      for (low, support), high in zip(steps, bounds, strict=True)])  # fmt: skip
+    return paths
 
 
 def _cross_validation(
-    fold_grams: Sequence[np.ndarray], sizes: Sequence[int], thresholds: np.ndarray
+    fold_grams: Sequence[np.ndarray], sizes: Sequence[int], supports: Sequence[np.ndarray]
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and standard error of the held-out mean squared error per threshold."""
-    errors = np.empty((len(thresholds), len(fold_grams)))
+    """Mean and standard error of the held-out mean squared error of each support.
+
+    Each candidate support is refitted by least squares on the training folds
+    (STLSQ's own last step) and scored on the held-out one.
+    """
+    errors = np.empty((len(supports), len(fold_grams)))
     for k, (held_out, size) in enumerate(zip(fold_grams, sizes, strict=True)):
         train = _factor(sum(g for j, g in enumerate(fold_grams) if j != k))
-        for i, threshold in enumerate(thresholds):
-            errors[i, k] = _rss(held_out, _stlsq(train, threshold)) / size
+        for i, support in enumerate(supports):
+            errors[i, k] = _rss(held_out, _least_squares(train, support)) / size
     return errors.mean(axis=1), errors.std(axis=1, ddof=1) / math.sqrt(len(fold_grams))
 
 
@@ -339,7 +478,8 @@ class _Design:
 
     fold_grams: list[np.ndarray]  # augmented [Θ | y], columns divided by `scale`
     sizes: np.ndarray  # rows per fold
-    scale: np.ndarray  # maxima of the columns, then of y
+    scale: np.ndarray  # per column, max|φ_i| · max|y| / max|group force|; then max|y|
+    dissipative: np.ndarray  # per column, whether it is in the dissipative group
     tss: float  # total sum of squares of y (SI)
     rows: Sequence[np.ndarray]  # per record, unscaled, for bagging
 
@@ -351,6 +491,10 @@ class _Design:
     def n_rows(self) -> int:
         return int(self.sizes.sum())
 
+    def thresholds(self, pair: np.ndarray) -> np.ndarray:
+        """Per-column thresholds from a (conservative, dissipative) pair."""
+        return np.where(self.dissipative, pair[1], pair[0])
+
 
 def _design(
     kins: Sequence[Kinematics],
@@ -360,33 +504,82 @@ def _design(
 ) -> _Design:
     """Band-passed library of every record, reduced to per-fold Gram matrices.
 
-    Each fold is one contiguous block of every record.
+    Every record is cut into blocks of :data:`CV_BLOCK_PERIODS` periods of its
+    band's lower edge, dealt to the folds in turn, so that every fold spans the
+    whole test (all excitation levels) and the held-out error measures
+    interpolation, not extrapolation to levels no training block has seen.
+    Columns are scaled to group shares (:func:`_group_force`).
     """
     rows = [_design_rows(k, terms, o) for k, o in zip(kins, offsets, strict=True)]
-    scale = np.max([np.max(np.abs(r), axis=1) for r in rows], axis=0)
-    zero = np.flatnonzero(scale[:-1] == 0)
+    peak = np.max([np.max(np.abs(r), axis=1) for r in rows], axis=0)
+    zero = np.flatnonzero(peak[:-1] == 0)
     if zero.size:
         raise ValueError(
             f"library column(s) {[terms[i].effect for i in zero]} are zero on these records"
         )
-    fold_grams = [np.zeros((scale.size, scale.size)) for _ in range(n_folds)]
+    fold_grams = [np.zeros((peak.size, peak.size)) for _ in range(n_folds)]
     sizes = np.zeros(n_folds, dtype=int)
-    for r in rows:
-        bounds = np.linspace(0, r.shape[1], n_folds + 1).astype(int)
-        for k, (start, stop) in enumerate(itertools.pairwise(bounds)):
-            block = r[:, start:stop]
-            fold_grams[k] += block @ block.T
-            sizes[k] += stop - start
-    normalise = np.outer(1 / scale, 1 / scale)
+    # Short records get shorter blocks, so that every fold gets at least one.
+    longest = sum(r.shape[1] for r in rows) // n_folds
+    dealt = 0
+    for kin, r in zip(kins, rows, strict=True):
+        block = min(math.ceil(CV_BLOCK_PERIODS * kin.sampling_rate_hz / kin.band_hz[0]), longest)
+        bounds = np.linspace(0, r.shape[1], max(1, r.shape[1] // block) + 1).astype(int)
+        for start, stop in itertools.pairwise(bounds):
+            fold_grams[dealt % n_folds] += r[:, start:stop] @ r[:, start:stop].T
+            sizes[dealt % n_folds] += stop - start
+            dealt += 1
+    dissipative = np.array([_is_dissipative(t) for t in terms])
+    scale = peak.copy()
+    scale[:-1] /= _group_force(sum(fold_grams) / np.outer(peak, peak), rows, peak, dissipative)
     y_sum = sum(float(np.sum(r[-1])) for r in rows)
     y_squares = sum(float(r[-1] @ r[-1]) for r in rows)
     return _Design(
-        fold_grams=[g * normalise for g in fold_grams],
+        fold_grams=[g / np.outer(scale, scale) for g in fold_grams],
         sizes=sizes,
         scale=scale,
+        dissipative=dissipative,
         tss=y_squares - y_sum**2 / sizes.sum(),
         rows=rows,
     )
+
+
+def _is_dissipative(term: LibraryTerm) -> bool:
+    """Whether a column is odd in the velocity, ``φ(x, −ẋ) = −φ(x, ẋ)`` (damping-like).
+
+    Such terms reverse with the motion and take energy out; the others (even
+    in ``ẋ``, and the Jenkins element: a stiffness with hysteresis, whose
+    force follows the displacement path) store it. Checked numerically at
+    points covering every sign combination of ``x`` and ``ẋ``.
+    """
+    x = np.linspace(-1e-3, 1e-3, 41)
+    v = 0.2 * np.cos(np.linspace(0.0, 9.0, 41))
+    return bool(np.allclose(term.feature(x, -v), -term.feature(x, v), rtol=1e-9, atol=0))
+
+
+def _group_force(
+    gram: np.ndarray, rows: Sequence[np.ndarray], peak: np.ndarray, dissipative: np.ndarray
+) -> np.ndarray:
+    """Per column, the peak force of its group over the peak of ``y``.
+
+    The group forces are those of a least-squares fit on the whole library
+    (``gram`` of the columns divided by ``peak``). Conservative and
+    dissipative forces are nearly orthogonal on a resonance record (even and
+    odd under time reversal), so each group's sum is well determined even
+    where single coefficients are not. At phase resonance the dissipative
+    force balances the excitation, one or two percent of the restoring
+    force; measured against its own group, a damping term's share is of
+    order one. A group weaker than :data:`GROUP_FLOOR` of ``max|y|`` is
+    measured against that floor.
+    """
+    xi = _least_squares(_factor(gram))
+    force = np.empty(dissipative.size)
+    for members in (~dissipative, dissipative):
+        if members.any():
+            weights = xi[members] / peak[:-1][members]
+            top = max(float(np.max(np.abs(weights @ r[:-1][members]))) for r in rows)
+            force[members] = max(top, GROUP_FLOOR)
+    return force
 
 
 @dataclass(frozen=True, eq=False)
@@ -394,66 +587,191 @@ class _Fit:
     """One regression of a design (internal)."""
 
     design: _Design
-    xi: np.ndarray  # normalised coefficients of y on Θ
-    threshold: float
+    xi: np.ndarray  # normalised coefficients (group shares) of y on Θ
+    threshold: np.ndarray  # (conservative, dissipative)
     path: ThresholdPath | None
-    held_out: float  # cross-validated mean squared error at `threshold` (scaled units)
+    held_out: float  # cross-validated mean squared error of the support (scaled units)
     rss: float  # SI, (m/s²)²
 
     @property
     def coefficients(self) -> np.ndarray:
         """SI coefficients in the model convention (``c_i = −w_i``)."""
-        return -unscale_coefficients(self.xi, self.design.scale[:-1], self.design.scale[-1])
+        return _unscaled(self.xi, self.design)
+
+    @property
+    def support(self) -> np.ndarray:
+        return self.xi != 0
+
+
+def _unscaled(xi: np.ndarray, design: _Design) -> np.ndarray:
+    """SI coefficients in the model convention (``c_i = −w_i``) of normalised ones."""
+    return -unscale_coefficients(xi, design.scale[:-1], design.scale[-1])
 
 
 def _regress(
     design: _Design,
-    names: Sequence[str],
-    threshold: float | str | None,
+    terms: Sequence[LibraryTerm],
+    threshold: float | Sequence[float] | str | None,
     n_effective: float,
     min_threshold: float,
-    n_path: int,
+    amplitudes_m: np.ndarray,
 ) -> _Fit:
-    """STLSQ with the threshold chosen as asked."""
+    """STLSQ with the thresholds chosen as asked."""
     gram = design.gram
-    _check_rank(gram, names)
+    _check_rank(gram, [t.effect for t in terms])
     factor = _factor(gram)
     path = None
     if threshold is None:
-        chosen = 0.0
+        pair = np.zeros(2)
+        xi = _least_squares(factor)
     elif isinstance(threshold, str):
-        thresholds = _threshold_path(factor, min_threshold, n_path)
-        fits = [_stlsq(factor, lam) for lam in thresholds]
-        n_terms = np.array([np.count_nonzero(xi) for xi in fits])
-        if threshold == "cv":
-            score, se = _cross_validation(design.fold_grams, design.sizes, thresholds)
-            best = int(np.argmin(score))
-            chosen_index = int(np.flatnonzero(score <= score[best] + se[best])[-1])
-        elif threshold == "bic":
-            rss = np.array([_rss(gram, xi) for xi in fits])
-            score = n_effective * np.log(rss / design.n_rows) + n_terms * np.log(n_effective)
-            se = None
-            chosen_index = int(np.flatnonzero(score <= score.min() + 1e-9 * abs(score.min()))[-1])
-        else:
-            raise ValueError(f"threshold must be a number, 'cv', 'bic' or None, got {threshold!r}")
-        path = ThresholdPath(thresholds, n_terms, score, se, threshold)
-        chosen = float(thresholds[chosen_index])
+        if threshold not in ("cv", "bic"):
+            raise ValueError(
+                "threshold must be a number, a (conservative, dissipative) pair, 'cv', 'bic' or "
+                f"None, got {threshold!r}"
+            )
+        paths = _group_paths(factor, design.dissipative, min_threshold)
+        candidates = [(np.array([tc, td]), sc | sd)
+                      for (tc, sc), (td, sd) in itertools.product(*paths)]  # fmt: skip
+        pairs = np.array([pair for pair, _ in candidates])
+        supports = [support for _, support in candidates]
+        score, se, fits = _scores(design, supports, threshold, n_effective)
+        n_terms = np.array([np.count_nonzero(support) for support in supports])
+        admissible_ = np.array([admissible(_model(terms, _unscaled(xi, design)), amplitudes_m)
+                                for xi in fits])  # fmt: skip
+        chosen, best, limit = _select(score, se, n_terms, admissible_)
+
+        def acceptable(xi: np.ndarray) -> bool:
+            model = _model(terms, _unscaled(xi, design))
+            return not admissible_.any() or admissible(model, amplitudes_m)
+
+        # Backward elimination from the selected and from the best candidate; the
+        # sparser end (then the better scoring) is the model.
+        ends = [_prune(design, fits[i], score[i], limit, threshold, n_effective, acceptable)
+                for i in dict.fromkeys((chosen, best))]  # fmt: skip
+        xi = min(ends, key=lambda end: (np.count_nonzero(end[0]), end[1]))[0]
+        pruned = tuple(t.effect for t, a, b in zip(terms, fits[chosen], xi, strict=True)
+                       if a and not b)  # fmt: skip
+        path = ThresholdPath(pairs, n_terms, score, se if threshold == "cv" else None,
+                             threshold, admissible_, chosen, pruned)  # fmt: skip
+        pair = pairs[chosen]
     else:
-        chosen = float(threshold)
-        if not math.isfinite(chosen) or chosen < 0:
-            raise ValueError(f"threshold must be finite and >= 0, got {threshold}")
-    xi = _stlsq(factor, chosen)
-    if threshold == "cv":
-        held_out = float(path.score[chosen_index])
-    else:
-        mean, _ = _cross_validation(design.fold_grams, design.sizes, np.array([chosen]))
-        held_out = float(mean[0])
-    return _Fit(design, xi, chosen, path, held_out, _rss(gram, xi) * design.scale[-1] ** 2)
+        pair = _threshold_pair(threshold)
+        xi = _stlsq(factor, design.thresholds(pair)) if pair.any() else _least_squares(factor)
+    return _fit(design, xi, pair, path)
+
+
+def _threshold_pair(threshold: float | Sequence[float]) -> np.ndarray:
+    """A fixed threshold as a (conservative, dissipative) pair; ValueError if invalid."""
+    try:
+        pair = np.broadcast_to(np.asarray(threshold, dtype=float), (2,)).copy()
+    except (TypeError, ValueError):
+        raise ValueError(
+            "threshold must be a number, a (conservative, dissipative) pair, 'cv', 'bic' or "
+            f"None, got {threshold!r}"
+        ) from None
+    if not (np.all(np.isfinite(pair)) and (np.all(pair > 0) or np.all(pair == 0))):
+        raise ValueError(f"fixed thresholds must be finite and > 0 (or both 0), got {threshold}")
+    return pair
+
+
+def _fit(design: _Design, xi: np.ndarray, pair: np.ndarray, path: ThresholdPath | None) -> _Fit:
+    """A :class:`_Fit` with the cross-validated error of its support."""
+    held_out = float(_cross_validation(design.fold_grams, design.sizes, [xi != 0])[0][0])
+    return _Fit(design, xi, pair, path, held_out, _rss(design.gram, xi) * design.scale[-1] ** 2)
+
+
+def _refit(design: _Design, fit: _Fit) -> _Fit:
+    """Least squares on a new design with the support (and thresholds) of an earlier fit."""
+    return _fit(design, _least_squares(_factor(design.gram), fit.support), fit.threshold, None)
+
+
+def _scores(
+    design: _Design, supports: Sequence[np.ndarray], criterion: str, n_effective: float
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Score, its standard error (0 for BIC) and least-squares fit of each candidate support."""
+    factor = _factor(design.gram)
+    fits = [_least_squares(factor, support) for support in supports]
+    if criterion == "cv":
+        score, se = _cross_validation(design.fold_grams, design.sizes, supports)
+        return score, se, fits
+    rss = np.array([_rss(design.gram, xi) for xi in fits])
+    n_terms = np.array([np.count_nonzero(support) for support in supports])
+    score = n_effective * np.log(rss / design.n_rows) + n_terms * np.log(n_effective)
+    return score, np.zeros_like(score), fits
+
+
+def _select(
+    score: np.ndarray, se: np.ndarray, n_terms: np.ndarray, admissible_: np.ndarray
+) -> tuple[int, int, float]:
+    """The one-standard-error rule among the admissible candidates.
+
+    Returns the candidate with the fewest terms scoring within one standard
+    error of the best admissible one (ties go to the lower score), that best
+    one, and the limit on the score. Without any admissible candidate the
+    rule runs on all of them, with a warning.
+    """
+    if not admissible_.any():
+        warnings.warn(
+            "no candidate model has positive damping over the tested amplitudes; the selected "
+            "model is not physically admissible (is the library missing a damping term?)",
+            stacklevel=6,
+        )
+    candidates = np.flatnonzero(admissible_) if admissible_.any() else np.arange(score.size)
+    best = int(candidates[np.argmin(score[candidates])])
+    limit = float(score[best] + se[best] + 1e-12 * abs(score[best]))
+    qualified = candidates[score[candidates] <= limit]
+    return int(min(qualified, key=lambda i: (n_terms[i], score[i]))), best, limit
+
+
+def _prune(
+    design: _Design,
+    xi: np.ndarray,
+    score: float,
+    limit: float,
+    criterion: str,
+    n_effective: float,
+    acceptable: Callable[[np.ndarray], bool],
+) -> tuple[np.ndarray, float]:
+    """Backward elimination: drop terms one at a time while the score stays within ``limit``.
+
+    Thresholds order terms by their share, which misorders nearly collinear
+    columns: on ``pandey2025`` records ``exp(x/x_s) − 1`` (spurious, a mix of
+    x, x², x³ and higher powers) carries 0.78 % of the conservative force and
+    the true x³ 0.77 %, so no threshold drops the one and keeps the other.
+    Each step tries the removal of every term and makes the best-scoring
+    one, if it stays within the limit and the model stays ``acceptable``.
+    Returns the last model and its score.
+    """
+    while np.count_nonzero(xi) > 1:
+        trials = [(xi != 0) & (np.arange(xi.size) != i) for i in np.flatnonzero(xi)]
+        scores, _, fits = _scores(design, trials, criterion, n_effective)
+        accepted = next((j for j in np.argsort(scores)
+                         if scores[j] <= limit and acceptable(fits[j])), None)  # fmt: skip
+        if accepted is None:
+            break
+        xi, score = fits[accepted], float(scores[accepted])
+    return xi, score
+
+
+def admissible(model: JointModel, amplitudes_m: ArrayLike) -> bool:
+    """Whether ``model`` has a phase-resonant backbone with positive damping at every amplitude.
+
+    A resonance test measures positive damping at every level (the shaker
+    feeds power in), so a model without damping, or whose damping turns
+    negative inside the tested range, contradicts the data, however small its
+    regression error, and a phase-locked loop cannot run it there.
+    Single-harmonic balance (:func:`identification.harmonic.backbone`).
+    """
+    if not model.terms:
+        return False
+    result = harmonic.backbone(model, amplitudes_m)
+    return bool(np.all(result.converged) and np.all(result.damping_ratio > 0))
 
 
 def _check_rank(gram: np.ndarray, names: Sequence[str]) -> None:
-    """ValueError naming the columns when the scaled library is numerically rank-deficient."""
-    values, vectors = np.linalg.eigh(gram[:-1, :-1])
+    """ValueError naming the columns when the library is numerically rank-deficient."""
+    values, vectors = np.linalg.eigh(_unit_columns(gram))
     singular = np.sqrt(np.clip(values, 0.0, None))  # ascending
     if singular[0] > singular[-1] / RANK_DEFICIENT:
         return
@@ -466,16 +784,23 @@ def _check_rank(gram: np.ndarray, names: Sequence[str]) -> None:
     )
 
 
-def _correlation(gram: np.ndarray) -> tuple[np.ndarray, float]:
-    """Column correlations and condition number of the scaled library.
+def _unit_columns(gram: np.ndarray) -> np.ndarray:
+    """Gram of the library columns scaled to unit norm: their correlation matrix.
 
     The columns are band-passed, hence zero-mean, so the cosine of the angle
-    between two columns is their Pearson correlation.
+    between two columns is their Pearson correlation. Unit columns make the
+    condition number independent of how the columns were scaled for the thresholds.
     """
     g = gram[:-1, :-1]
     norms = np.sqrt(np.diag(g))
-    values = np.clip(np.linalg.eigvalsh(g), 0.0, None)
-    return g / np.outer(norms, norms), float(np.sqrt(values[-1] / values[0]))
+    return g / np.outer(norms, norms)
+
+
+def _correlation(gram: np.ndarray) -> tuple[np.ndarray, float]:
+    """Column correlations and condition number of the library (unit columns)."""
+    correlation = _unit_columns(gram)
+    values = np.clip(np.linalg.eigvalsh(correlation), 0.0, None)
+    return correlation, float(np.sqrt(values[-1] / values[0]))
 
 
 # --------------------------------------------------------------------------- report
@@ -495,14 +820,19 @@ class Identification:
         SI coefficient of every library term in the model convention
         (``ẍ + Σ c_i φ_i = −a_base``), 0 where the term was dropped.
     normalised_coefficients
-        Peak share ``c_i max|φ_i| / max|ẍ + a_base|`` (signed), the scale the
-        threshold applies to.
+        Group share ``c_i max|φ_i| / max|f_group|`` (signed): the term's peak
+        over the peak force of its group (``groups``), the scale the threshold
+        applies to.
+    groups
+        ``"conservative"`` or ``"dissipative"`` per library term (:data:`GROUPS`).
     threshold
-        The STLSQ threshold used (a peak share).
+        The STLSQ thresholds used, (conservative, dissipative) group shares
+        (NaN for a group the library lacks).
     threshold_method
         ``"cv"``, ``"bic"``, ``"fixed"`` or ``"none"`` (plain least squares).
     path
-        Scores along the threshold path (None for a fixed threshold).
+        Candidates along the threshold paths and their scores (``"cv"``,
+        ``"bic"``), else None.
     r2
         Coefficient of determination of ``ẍ + a_base`` over the regression samples.
     residual_rms
@@ -530,7 +860,8 @@ class Identification:
     library: tuple[LibraryTerm, ...]
     coefficients: dict[str, float]
     normalised_coefficients: dict[str, float]
-    threshold: float
+    groups: dict[str, str]
+    threshold: tuple[float, float]
     threshold_method: str
     path: ThresholdPath | None
     r2: float
@@ -561,17 +892,19 @@ class Identification:
     def summary(self) -> str:
         """Plain-text report: coefficients, shares, inclusion, fit quality, collinearity."""
         lines = [
-            f"SINDy identification: {self.n_samples} samples, threshold {self.threshold:.3g} "
+            f"SINDy identification: {self.n_samples} samples, thresholds "
+            f"{self.threshold[0]:.3g} (conservative) / {self.threshold[1]:.3g} (dissipative) "
             f"({self.threshold_method}), R² = {self.r2:.6f}, residual RMS "
             f"{self.residual_rms:.4g} m/s² (held out {self.held_out_rms:.4g}), condition number "
             f"{self.condition_number:.3g}",
-            f"{'effect':<30}{'coefficient':>14}{'ξ':>11}{'peak share':>12}{'P(incl.)':>10}",
+            f"{'effect':<30}{'group':>13}{'coefficient':>13}{'ξ':>11}{'peak share':>12}"
+            f"{'P(incl.)':>10}",
         ]
         for name in self.effects:
             share = self.peak_contribution.get(name)
             incl = None if self.inclusion_probability is None else self.inclusion_probability[name]
             lines.append(
-                f"{name:<30}{self.coefficients[name]:>14.4g}"
+                f"{name:<30}{self.groups[name]:>13}{self.coefficients[name]:>13.4g}"
                 f"{self.normalised_coefficients[name]:>11.2e}"
                 f"{'' if share is None else f'{share:.2%}':>12}"
                 f"{'' if incl is None else f'{incl:.2f}':>10}"
@@ -647,13 +980,12 @@ def identify_arrays(
     effects: Sequence[str],
     *,
     shapes: Mapping[str, Mapping[str, float | Sequence[float]]] | None = None,
-    threshold: float | str | None = "cv",
+    threshold: float | Sequence[float] | str | None = "cv",
     ensemble: bool = False,
     n_models: int = 20,
     seed: int = 0,
     n_folds: int = 5,
     min_threshold: float = 1e-3,
-    n_path: int = 30,
     offset_iterations: int = 3,
     n_harmonics: int = 3,
     edge_periods: float = 20.0,
@@ -681,17 +1013,20 @@ def identify_arrays(
         list of values is scanned and the best-scoring combination kept
         (``{"microslip": {"k_t": [...], "F_s": [...]}}`` scans a grid).
     threshold
-        ``"cv"``, ``"bic"`` (see the module notes), a fixed peak-share
-        threshold, or None for plain least squares on the whole library.
+        ``"cv"``, ``"bic"`` (see the module notes), a fixed group-share
+        threshold (one for both groups, or a ``(conservative, dissipative)``
+        pair), or None for plain least squares on the whole library.
     ensemble
         Also bag ``n_models`` STLSQ fits (``pysindy.EnsembleOptimizer``, time
-        samples drawn with replacement, ``seed``) at the chosen threshold and
+        samples drawn with replacement, ``seed``) at the chosen thresholds and
         report per-term inclusion probabilities. Consecutive samples are
-        correlated, so these probabilities are optimistic.
+        correlated, so these probabilities are optimistic; the backward
+        elimination after the threshold paths is not repeated per bag.
     n_folds
-        Time blocks per record for ``"cv"``.
-    min_threshold, n_path
-        Lowest threshold tried and number of thresholds on the path.
+        Cross-validation folds; each takes every ``n_folds``-th block of
+        :data:`CV_BLOCK_PERIODS` periods of every record.
+    min_threshold
+        Lowest threshold tried (a group share).
     offset_iterations
         Mean-offset reconstructions (:func:`mean_offset`) after the first fit; 0 disables.
     n_harmonics, edge_periods
@@ -721,6 +1056,8 @@ def identify_arrays(
     grid = _library_grid(effects, shapes)
     if n_folds < 2:
         raise ValueError(f"n_folds must be >= 2, got {n_folds}")
+    if not (math.isfinite(min_threshold) and 0 < min_threshold < 1):
+        raise ValueError(f"min_threshold must be in (0, 1), got {min_threshold}")
     rates = [_sampling_rate(np.asarray(ti, dtype=float), label)
              for ti, label in zip(channels[0], labels, strict=True)]  # fmt: skip
     if max(rates) - min(rates) > 1e-6 * max(rates):
@@ -738,8 +1075,9 @@ def identify_arrays(
             raise ValueError(f"{label}: {exc}") from None
     n_effective = sum(2 * (k.band_hz[1] - k.band_hz[0]) * (k.valid.stop - k.valid.start)
                       / k.sampling_rate_hz for k in kins)  # fmt: skip
+    amplitudes_m = _tested_amplitudes(kins)
     selection = dict(threshold=threshold, n_effective=n_effective, min_threshold=min_threshold,
-                     n_path=n_path)  # fmt: skip
+                     amplitudes_m=amplitudes_m)  # fmt: skip
     best, refused = None, []
     for terms in grid:
         try:
@@ -749,15 +1087,30 @@ def identify_arrays(
                 raise
             refused.append(f"{_shape_text(terms)} ({exc})")
             continue
-        if best is None or candidate[1].held_out < best[1].held_out:
-            best = candidate
+        # An admissible model beats any inadmissible one, then the held-out error decides.
+        rank = (not admissible(_model(terms, candidate[1].coefficients), amplitudes_m),
+                candidate[1].held_out)  # fmt: skip
+        if best is None or rank < best[0]:
+            best = (rank, candidate)
     if best is None:
         raise RankDeficientLibraryError("every shape of the grid gives a rank-deficient library: "
                                         + "; ".join(refused))  # fmt: skip
     if refused:
         warnings.warn("shape grid points skipped: " + "; ".join(refused), stacklevel=2)
-    terms, fit, offsets, iterations = best
+    terms, fit, offsets, iterations = best[1]
     return _report(kins, terms, fit, offsets, iterations, threshold, ensemble, n_models, seed)
+
+
+def _tested_amplitudes(kins: Sequence[Kinematics], n: int = 16) -> np.ndarray:
+    """Amplitudes (m) spanning the records: 2nd percentile to largest of the envelope.
+
+    The low percentile leaves out the start-up from rest, where no level is held.
+    """
+    envelope = np.concatenate(
+        [amplitude_envelope(k.displacement, k.sampling_rate_hz, k.band_hz[0] / 4)[k.valid]
+         for k in kins]
+    )  # fmt: skip
+    return np.geomspace(np.percentile(envelope, 2), envelope.max(), n)
 
 
 def _shape_text(terms: Sequence[LibraryTerm]) -> str:
@@ -794,30 +1147,28 @@ def _fit_with_offsets(
 ) -> tuple[tuple[LibraryTerm, ...], _Fit, list[np.ndarray | None], int]:
     """Fit, then refit with the mean offset each fit implies; keep the best iterate.
 
-    The threshold is chosen on the first fit and held while the offset is
+    The support is chosen on the first fit and held while the offset is
     iterated, and chosen again on the kept design. Iterates are compared by
     their cross-validated error: the in-sample residual would favour spurious
     terms that mimic the missing offset. The iteration stops early when the
     model has no even term (nothing shifts the mean) or its coefficients settle.
     """
-    names = [t.effect for t in terms]
     offsets: list[np.ndarray | None] = [None] * len(kins)
-    fit = first = _regress(_design(kins, terms, offsets, n_folds), names, **selection)
-    held = {**selection, "threshold": first.threshold}
+    fit = first = _regress(_design(kins, terms, offsets, n_folds), terms, **selection)
     best = (fit, offsets, 0)
     for iteration in range(1, offset_iterations + 1):
         model = _model(terms, fit.coefficients)
         if model.linear_stiffness <= 0 or all(CATALOGUE[e].parity == "odd" for e in model.effects):
             break
         offsets = [mean_offset(model, k) for k in kins]
-        previous, fit = fit, _regress(_design(kins, terms, offsets, n_folds), names, **held)
+        previous, fit = fit, _refit(_design(kins, terms, offsets, n_folds), first)
         if fit.held_out < best[0].held_out:
             best = (fit, offsets, iteration)
-        if np.allclose(fit.xi, previous.xi, rtol=1e-3, atol=0):
+        if np.allclose(fit.coefficients, previous.coefficients, rtol=1e-3, atol=0):
             break
     fit, offsets, iteration = best
-    if iteration and isinstance(selection["threshold"], str):
-        fit = _regress(fit.design, names, **selection)
+    if iteration:
+        fit = _regress(fit.design, terms, **selection)
     return terms, fit, offsets, iteration
 
 
@@ -842,11 +1193,11 @@ def _report(kins, terms, fit, offsets, iterations, threshold, ensemble, n_models
     model = _model(terms, fit.coefficients)
     inclusion = ensemble_coefficients = None
     if ensemble:
-        rows, _ = scale_by_maximum(np.hstack(fit.design.rows), axis=1)
-        bagged = _bagged_coefficients(rows[:-1].T, rows[-1], fit.threshold, n_models, seed)
+        rows = np.hstack(fit.design.rows) / fit.design.scale[:, None]
+        bagged = _bagged_coefficients(rows[:-1].T, rows[-1], fit.design.thresholds(fit.threshold),
+                                      n_models, seed)  # fmt: skip
         inclusion = dict(zip(names, np.mean(bagged != 0, axis=0).tolist(), strict=True))
-        median = -unscale_coefficients(np.median(bagged, axis=0), fit.design.scale[:-1],
-                                       fit.design.scale[-1])  # fmt: skip
+        median = _unscaled(np.median(bagged, axis=0), fit.design)
         ensemble_coefficients = dict(zip(names, median.tolist(), strict=True))
     method = "none" if threshold is None else threshold if isinstance(threshold, str) else "fixed"
     return Identification(
@@ -854,7 +1205,8 @@ def _report(kins, terms, fit, offsets, iterations, threshold, ensemble, n_models
         library=tuple(terms),
         coefficients=dict(zip(names, fit.coefficients.tolist(), strict=True)),
         normalised_coefficients=dict(zip(names, (-fit.xi).tolist(), strict=True)),
-        threshold=fit.threshold,
+        groups={n: GROUPS[d] for n, d in zip(names, fit.design.dissipative.tolist(), strict=True)},
+        threshold=(float(fit.threshold[0]), float(fit.threshold[1])),
         threshold_method=method,
         path=fit.path,
         r2=1.0 - fit.rss / fit.design.tss,
@@ -895,14 +1247,13 @@ def _numpy_seed(seed: int) -> Iterator[None]:
         np.random.set_state(state)  # noqa: NPY002
 
 
-def _bagged_coefficients(theta_n, y_n, threshold, n_models, seed) -> np.ndarray:
+def _bagged_coefficients(theta_n, y_n, thresholds, n_models, seed) -> np.ndarray:
     """``(n_models, n_terms)`` normalised coefficients of bagged STLSQ fits."""
-    inner = ps.STLSQ(threshold=threshold, alpha=1e-12 * np.sum(theta_n * theta_n), max_iter=50)
+    inner, ratio = _stlsq_optimizer(theta_n, thresholds)
     optimizer = ps.EnsembleOptimizer(inner, bagging=True, n_models=n_models)
-    with _numpy_seed(seed), warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Sparsity parameter is too big")
-        optimizer.fit(theta_n, y_n)
-    return np.array(optimizer.coef_list)[:, 0, :]
+    with _numpy_seed(seed), _quiet_stlsq():
+        optimizer.fit(theta_n * ratio, y_n)
+    return np.array(optimizer.coef_list)[:, 0, :] * ratio
 
 
 # --------------------------------------------------------------------------- validation

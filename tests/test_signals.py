@@ -3,6 +3,7 @@ import pytest
 from scipy import signal
 
 from identification.signals import (
+    amplitude_envelope,
     bandpass,
     central_difference,
     displacement_from_velocity,
@@ -77,6 +78,19 @@ def test_lowpass_keeps_slow_part_only():
     out = lowpass(slow + 1e-3 * np.cos(2 * np.pi * 100 * t), FS, 20.0)
     # The local mean of an oscillation is ill-defined near the ends: compare inside.
     np.testing.assert_allclose(out[5000:-5000], slow[5000:-5000], atol=1e-7)
+
+
+def test_amplitude_envelope_follows_a_stepped_level():
+    # 100 Hz at 0.1 mm, then a 0.1 s raised-cosine ramp to 0.5 mm: the envelope is the
+    # amplitude away from the ramp (a hold phase of a resonance test), monotone across it.
+    t = np.arange(0, 2.0, 1 / FS)
+    ramp = np.clip((t - 1.0) / 0.1, 0.0, 1.0)
+    amplitude = 1e-4 + 4e-4 * 0.5 * (1 - np.cos(np.pi * ramp))
+    envelope = amplitude_envelope(amplitude * np.cos(2 * np.pi * 100 * t + 0.4), FS, 20.0)
+    hold = (np.abs(t - 0.5) < 0.3) | (np.abs(t - 1.6) < 0.2)
+    np.testing.assert_allclose(envelope[hold], amplitude[hold], rtol=2e-3)
+    inside = (t > 1.0) & (t < 1.1)
+    assert np.all(np.diff(envelope[inside]) > 0)
 
 
 def test_central_difference_has_the_textbook_error():
