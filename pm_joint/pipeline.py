@@ -32,6 +32,8 @@ __all__ = [
     "criticize_campaign",
     "identify_campaign",
     "load_backbones",
+    "record_labels",
+    "train_surrogate_stage",
     "update_backbones",
     "write_rig_campaign",
 ]
@@ -222,7 +224,12 @@ def update_backbones(
     from pm_joint.report import report
     from pm_joint.updating import build_model, sample, save_posterior
 
-    pm_model = build_model(model, measured, forward=forward, surrogate=surrogate, names=names)
+    levels = None
+    if forward == "surrogate":
+        levels = _levels_within_surrogate(measured, surrogate)
+    pm_model = build_model(
+        model, measured, forward=forward, surrogate=surrogate, names=names, levels=levels
+    )
     idata = sample(
         pm_model, sampler=sampler, draws=draws, tune=tune, chains=chains, random_seed=seed
     )
@@ -230,8 +237,37 @@ def update_backbones(
         idata, out, metadata={"forward": forward, "sampler": sampler, "surrogate": str(surrogate)}
     )
     if report_dir is not None:
-        report(idata, measured, out=report_dir, sampler=sampler)
+        from pm_joint.likelihood import BackboneDensity
+
+        density = BackboneDensity.fit(measured, levels)  # as build_model fitted it
+        report(idata, measured, density=density, out=report_dir, sampler=sampler)
     return idata
+
+
+def _levels_within_surrogate(measured: BackboneSet, surrogate) -> np.ndarray:
+    """Likelihood levels over the amplitudes both the measurements and the surrogate cover.
+
+    The surrogate's range is that of its prediction at the centre of its
+    training box; a model that cannot be held at the largest measured
+    amplitudes (its excitation would have to fall) is compared where it can.
+    """
+    from pm_joint.likelihood import amplitude_levels
+    from surrogates.runtime import SurrogateRuntime
+
+    runtime = surrogate if isinstance(surrogate, SurrogateRuntime) else None
+    runtime = runtime or SurrogateRuntime.load(surrogate)
+    centre = np.mean(np.asarray(runtime.bounds, dtype=float), axis=1)
+    amplitude = runtime.amplitude_m(centre)
+    low, high = measured.common_range()
+    low, high = max(low, float(np.min(amplitude))), min(high, float(np.max(amplitude)))
+    levels = amplitude_levels(measured)
+    inside = levels[(levels >= low) & (levels <= high)]
+    if inside.size < 3:
+        raise ValueError(
+            f"the surrogate covers {1e3 * np.min(amplitude):.3g}–{1e3 * np.max(amplitude):.3g} mm "
+            f"at the centre of its box: fewer than 3 likelihood levels of the measured range"
+        )
+    return np.linspace(inside[0], inside[-1], levels.size)
 
 
 def posterior_sections(report_folder: str | os.PathLike, page_folder: str | os.PathLike):
@@ -347,3 +383,120 @@ def run_report(
     if criticism is not None:
         sections.append(criticism_section(criticism, out))
     return write_index(out, "pm-joint report", sections)
+
+
+def record_labels(records: Sequence, model: JointModel, names: Sequence[str]) -> np.ndarray:
+    """Parameters of each record alone: least squares on the model's own terms.
+
+    The paper labels its measured backbones by identifying each record; with
+    the model's support fixed (no thresholding) that is a well-posed fit of
+    the same parameters, record by record. Shape parameters keep the model's
+    values.
+    """
+    shapes = {t.effect: dict(t.shape) for t in model.terms if t.shape}
+    rows = []
+    for record in records:
+        fitted = identify(record, model.effects, threshold=None, shapes=shapes).model
+        values = {**model.parameters, **fitted.parameters}
+        rows.append([values[n] for n in names])
+    return np.array(rows)
+
+
+def train_surrogate_stage(
+    measured: BackboneSet,
+    model: JointModel,
+    out: str | os.PathLike,
+    *,
+    labels: np.ndarray | None = None,
+    n_curves: int = 500,
+    spread: float = 0.2,
+    max_epochs: int | None = None,
+    seed: int = 0,
+    progress: bool = True,
+):
+    """Dataset (analytical + measured curves), training and ONNX export, as the paper.
+
+    ``labels`` are the measured curves' parameters in the order of
+    :func:`identification.fit.default_free` (e.g. :func:`record_labels`);
+    without them only analytical curves are used. The training box covers
+    ± ``spread`` around the model and every label. The analytical curves
+    (harmonic balance, inverted onto fixed excitation levels) make up the rest
+    of ``n_curves``. Writes ``out/surrogate.onnx``, its sidecar,
+    ``out/dataset.npz`` and a prediction figure; returns the
+    :class:`~surrogates.runtime.SurrogateRuntime`.
+    """
+    from identification.fit import default_free
+    from surrogates.dataset import add_measured, default_bounds, generate_dataset
+    from surrogates.export import export_surrogate
+    from surrogates.runtime import SurrogateRuntime
+    from surrogates.train import TrainingConfig, train_surrogate
+
+    out = Path(out)
+    names = default_free(model)
+    box = default_bounds(model, names, spread)
+    n_measured = 0
+    if labels is not None:
+        labels = np.asarray(labels, dtype=float)
+        margin = 0.05 * (box[:, 1] - box[:, 0])
+        box[:, 0] = np.minimum(box[:, 0], labels.min(axis=0) - margin)
+        box[:, 1] = np.maximum(box[:, 1], labels.max(axis=0) + margin)
+        n_measured = len(measured)
+    low, high = _reachable_range(
+        model,
+        min(b.amplitude_range_m[0] for b in measured),
+        max(b.amplitude_range_m[1] for b in measured),
+    )
+    dataset = generate_dataset(
+        model, names, max(n_curves - n_measured, 1), bounds=box,
+        amplitude_range_m=(low, high), seed=seed, progress=progress,
+    )  # fmt: skip
+    if labels is not None:
+        dataset = add_measured(dataset, measured, labels)
+    dataset.save(out / "dataset.npz")
+    config = TrainingConfig(seed=seed, progress=progress)
+    if max_epochs is not None:
+        config = TrainingConfig(
+            seed=seed, progress=progress, max_epochs=max_epochs, patience=max_epochs,
+            finetune_epochs=max_epochs // 2,
+        )  # fmt: skip
+    surrogate = train_surrogate(dataset.X, dataset.Y, dataset.spec, config)
+    export_surrogate(surrogate, out)
+    runtime = SurrogateRuntime.load(out)
+    _plot_surrogate_check(runtime, dataset, out / "surrogate_predictions.png")
+    return runtime
+
+
+def _reachable_range(model: JointModel, low: float, high: float) -> tuple[float, float]:
+    """The part of ``[low, high]`` a stepped excitation can hold the model at.
+
+    Excitation levels map one-to-one onto amplitudes only while the base
+    acceleration the backbone needs increases with amplitude; past its first
+    maximum a PLL test jumps, so the range ends there.
+    """
+    grid = np.geomspace(low, high, 200)
+    hb = harmonic.backbone(model, grid, method="multi")
+    level = np.where(hb.converged, hb.base_acceleration, np.nan)
+    falling = np.flatnonzero(~(np.diff(level) > 0))
+    end = grid[falling[0]] if falling.size else high
+    if end <= low * 1.5:
+        raise ValueError(
+            f"model {model.name or model.equation()!r}: its backbone needs a base acceleration "
+            f"that does not increase over the measured {1e3 * low:.3g}–{1e3 * high:.3g} mm"
+        )
+    return low, float(end)
+
+
+def _plot_surrogate_check(runtime, dataset, path: Path, n: int = 6) -> None:
+    """A few curves of the dataset against the surrogate's prediction (the paper's Fig. 17)."""
+    rows = np.linspace(0, len(dataset) - 1, n).astype(int)
+    predicted = runtime.predict(dataset.X[rows])
+    a, f = dataset.spec.channel_index("amplitude_m"), dataset.spec.channel_index("frequency_hz")
+    fig = Figure(figsize=(6, 4.5))
+    ax = fig.subplots()
+    for k, row in enumerate(rows):
+        line = ax.plot(1e3 * dataset.Y[row, :, a], dataset.Y[row, :, f], "o", ms=3)[0]
+        ax.plot(1e3 * predicted[k, :, a], predicted[k, :, f], "-", color=line.get_color())
+    ax.set(xlabel="amplitude (mm)", ylabel="frequency (Hz)",
+           title="dataset curves (dots) vs surrogate (lines)")  # fmt: skip
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
