@@ -1,8 +1,8 @@
 """Learned forward models: backbone surrogates (torch to train, onnxruntime to run).
 
-The runtime names are imported eagerly and need no torch; the training and
-export names load torch on first access, so that ``import surrogates`` stays
-light in sampler worker processes.
+The runtime names are imported eagerly and need no torch; the dataset,
+training and export names load their modules (and torch) on first access, so
+that ``import surrogates`` stays light in sampler worker processes.
 """
 
 from __future__ import annotations
@@ -14,18 +14,24 @@ from surrogates.runtime import CHANNEL_UNITS, SurrogateRuntime, SurrogateSpec
 
 __all__ = [
     "CHANNEL_UNITS",
+    "BackboneDataset",
     "NetConfig",
     "Surrogate",
     "SurrogateRuntime",
     "SurrogateSpec",
     "TrainingConfig",
+    "add_measured",
     "backbone_metrics",
     "export_surrogate",
+    "generate_dataset",
     "table5_study",
     "train_surrogate",
 ]
 
 _LAZY = {
+    "BackboneDataset": "surrogates.dataset",
+    "add_measured": "surrogates.dataset",
+    "generate_dataset": "surrogates.dataset",
     "NetConfig": "surrogates.nets",
     "Surrogate": "surrogates.train",
     "TrainingConfig": "surrogates.train",

@@ -330,6 +330,11 @@ class SurrogateRuntime:
     # -- predictions ---------------------------------------------------------
 
     @property
+    def model_bytes(self) -> bytes:
+        """The serialised ONNX graph the session runs (read-only)."""
+        return self._model_bytes
+
+    @property
     def parameter_names(self) -> tuple[str, ...]:
         return self.spec.parameter_names
 
