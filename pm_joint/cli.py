@@ -69,6 +69,21 @@ def _cmd_identify(args: argparse.Namespace) -> None:
     print(f"wrote {args.out}")
 
 
+def _cmd_train_surrogate(args: argparse.Namespace) -> None:
+    from identification.fit import default_free
+    from identification.records import Campaign
+    from pm_joint.pipeline import campaign_backbones, record_labels, train_surrogate_stage
+
+    model = JointModel.from_json(args.model)
+    measured = campaign_backbones(args.dir)
+    labels = record_labels(list(Campaign(args.dir)), model, default_free(model))
+    runtime = train_surrogate_stage(
+        measured, model, args.out, labels=labels, n_curves=args.curves,
+        max_epochs=args.epochs, seed=args.seed,
+    )  # fmt: skip
+    print(f"wrote {args.out}/surrogate.onnx for parameters {', '.join(runtime.parameter_names)}")
+
+
 def _cmd_criticize(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import criticize_campaign
 
@@ -148,6 +163,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="model JSON file")
     p.add_argument("--records", type=int, default=3, help="records fitted jointly (default 3)")
     p.set_defaults(func=_cmd_identify)
+
+    p = sub.add_parser("train-surrogate", help="dataset, training and ONNX export of a surrogate")
+    p.add_argument("dir", help="campaign folder (TRC layout): the measured curves")
+    p.add_argument("--model", required=True, help="model JSON file")
+    p.add_argument("--out", required=True, help="surrogate folder")
+    p.add_argument("--curves", type=int, default=500, help="training curves (default 500)")
+    p.add_argument("--epochs", type=int, help="epochs per stage (default: the paper-sized run)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.set_defaults(func=_cmd_train_surrogate)
 
     p = sub.add_parser("criticize", help="where the model fails and which effect it lacks")
     p.add_argument("dir", help="campaign folder (TRC layout)")

@@ -56,13 +56,6 @@ def write_rig_campaign(
     return rig.write_campaign(out, assemblies=assemblies, runs=runs, seed=seed, progress=progress)
 
 
-def _campaign(folder: str | os.PathLike) -> Campaign:
-    campaign = Campaign(folder)
-    if len(campaign) == 0:
-        raise ValueError(f"{folder}: no phase-resonance records (ConfigN_PRT_...) found")
-    return campaign
-
-
 def campaign_backbones(
     folder: str | os.PathLike,
     out: str | os.PathLike | None = None,
@@ -71,7 +64,7 @@ def campaign_backbones(
     progress: bool = True,
 ) -> BackboneSet:
     """Backbones of every record in a campaign folder; optionally saved as CSV (+ PNG)."""
-    backbones = extract_backbones(_campaign(folder), n_periods=n_periods, progress=progress)
+    backbones = extract_backbones(Campaign(folder), n_periods=n_periods, progress=progress)
     if out is not None:
         out = Path(out)
         backbones.to_csv(out)
@@ -104,7 +97,7 @@ def identify_campaign(
     With ``out`` (a JSON path) the model is written there, with the velocity
     and acceleration validation figures (the paper's Figs. 9–10) beside it.
     """
-    campaign = _campaign(folder)
+    campaign = Campaign(folder)
     chosen = [campaign[i] for i in range(min(records, len(campaign)))]
     result = identify(chosen, list(effects), **options)
     if out is not None:
@@ -187,7 +180,7 @@ def criticize_campaign(
 
     if not isinstance(model, JointModel):
         model = JointModel.from_json(model)
-    campaign = _campaign(folder)
+    campaign = Campaign(folder)
     records = list(campaign) if use_records else None
     measured = extract_backbones(campaign) if records is None else None
     crit = criticize(model, measured, records=records)

@@ -1,0 +1,194 @@
+"""The ``pm-joint`` command, subcommand by subcommand.
+
+Two kinds of campaign folders: one written by ``pm-joint rig``, and one written
+here by plain Python string formatting in the TRC layout (as another program
+would), with the analytical steady state of linear oscillators at phase
+resonance, so that the expected backbones and model are known exactly.
+"""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import cumulative_trapezoid
+
+from identification.model import JointModel
+from pm_joint.cli import main
+from pm_joint.html import missing_links
+
+FS = 10_000.0
+ZETA = 0.005
+SHAPE = np.sin(np.pi * np.linspace(0.15, 0.85, 5))[:, None] * np.array([0.9, 1.0, 0.9])
+
+
+def _write_hand_made_record(folder: Path, name: str, f0: float, levels: list[float]) -> None:
+    """A linear oscillator ẍ + 2ζω₀ẋ + ω₀²x = −a_base, stepped along its backbone.
+
+    The relative displacement is x = a(t) cos ω₀t with a(t) held at the resonant
+    amplitude of each level and moved between levels by raised-cosine ramps;
+    the base acceleration is what the equation of motion needs for exactly that
+    motion, so the record is consistent everywhere, ramps included.
+    """
+    omega = 2 * np.pi * f0
+    hold_s, ramp_s = 1.0, 0.1
+    t = np.arange(int(len(levels) * hold_s * FS)) / FS
+    target = 2.0 * np.asarray(levels) / (2 * ZETA * omega**2)  # gain 2 m/s² per volt
+    amplitude = np.full_like(t, target[0])
+    rate = np.zeros_like(t)
+    curvature = np.zeros_like(t)
+    for k in range(1, len(levels)):
+        s = np.clip((t - k * hold_s) / ramp_s, 0, 1)
+        jump = target[k] - target[k - 1]
+        amplitude += jump * 0.5 * (1 - np.cos(np.pi * s))
+        inside = (s > 0) & (s < 1)
+        rate += np.where(inside, jump * 0.5 * np.pi / ramp_s * np.sin(np.pi * s), 0)
+        curvature += np.where(inside, jump * 0.5 * (np.pi / ramp_s) ** 2 * np.cos(np.pi * s), 0)
+    sin, cos = np.sin(omega * t), np.cos(omega * t)
+    relative_velocity = rate * cos - amplitude * omega * sin
+    base_acceleration = (2 * ZETA * omega**2 * amplitude + 2 * omega * rate) * sin - (
+        curvature + 2 * ZETA * omega * rate
+    ) * cos
+    base_velocity = -(2 * ZETA * omega * target[0]) + cumulative_trapezoid(
+        base_acceleration, t, initial=0
+    )
+    shape = SHAPE.ravel() / SHAPE.ravel()[7]
+    panel = shape[:, None] * relative_velocity + base_velocity
+    phase = np.degrees(omega * t) % 360
+    rows = np.column_stack([t, panel.T, base_velocity, base_velocity, np.full_like(t, f0), phase])
+    lines = [",".join(f"{v:.9e}" for v in row) for row in rows]
+    (folder / f"{name}.csv").write_text("\n".join(lines) + "\n")
+
+
+@pytest.fixture(scope="module")
+def hand_made(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("hand_made")
+    steps = []
+    for i, value in enumerate([0.5, 0.8, 1.3, 2.0, 3.0, 4.5]):  # holds after 0.1 s ramps
+        steps += [f"{i * 1.0 + (0.1 if i else 0):.6f} {value}", f"{i + 1.0 - 1e-4:.6f} {value}"]
+    (folder / "Config7_PRT_amplitude_steps.txt").write_text("\n".join(steps) + "\n")
+    for k, f0 in enumerate([99.5, 100.0, 100.5], start=1):
+        _write_hand_made_record(folder, f"Config7_PRT_Assemb{k}", f0, [0.5, 0.8, 1.3, 2.0, 3.0, 4.5])
+    return folder
+
+
+@pytest.fixture(scope="module")
+def rig_campaign(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("rig") / "campaign"
+    assert (
+        main(["rig", "trc-like", "--out", str(folder), "--assemblies", "3", "--levels", "6"]) == 0
+    )
+    return folder
+
+
+def test_every_subcommand_has_help():
+    for command in ("effects", "model", "rig", "backbones", "identify", "train-surrogate",
+                    "criticize", "update", "report", "demo"):  # fmt: skip
+        done = subprocess.run(
+            [sys.executable, "-m", "pm_joint.cli", command, "--help"],
+            capture_output=True,
+            text=True,
+        )
+        assert done.returncode == 0, done.stderr
+        assert "usage: pm-joint" in done.stdout
+
+
+@pytest.mark.parametrize(
+    ("argv", "reason"),
+    [
+        (["backbones", "/no/such/folder"], "campaign folder not found"),
+        (["backbones", "."], "no TRC data files"),
+        (["model", "--json", "/no/such/model.json"], "model.json"),
+        (["update", "/no/such/folder", "--forward", "surrogate", "--out", "p.nc"], "--surrogate"),
+    ],
+)
+def test_bad_input_exits_with_a_one_line_reason(argv, reason, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # "." is an empty folder
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and reason in err
+
+
+def test_unknown_effect_is_refused(hand_made, capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["identify", str(hand_made), "--effects", "linear_stiffness,nope", "--out", "m.json"])
+    assert info.value.code == 2
+    assert "unknown effect 'nope'" in capsys.readouterr().err
+
+
+def test_hand_made_records_give_the_known_backbones_and_model(hand_made, tmp_path):
+    csv = tmp_path / "backbones.csv"
+    assert main(["backbones", str(hand_made), "--out", str(csv)]) == 0
+    table = __import__("pandas").read_csv(csv)
+    assert len(table) == 18
+    for (_, curve), f0 in zip(table.groupby("curve"), [99.5, 100.0, 100.5], strict=True):
+        np.testing.assert_allclose(curve["frequency_hz"], f0, rtol=1e-6)
+        # the record's base velocity comes from the trapezoid rule: (ωΔt)²/12 ≈ 3e-4
+        np.testing.assert_allclose(curve["damping_ratio"], ZETA, rtol=1e-3)
+
+    model_path = tmp_path / "model.json"
+    argv = [
+        "identify",
+        str(hand_made),
+        "--effects",
+        "linear_stiffness,viscous_damping,cubic_stiffness",
+    ]
+    assert main([*argv, "--out", str(model_path), "--records", "1"]) == 0
+    model = JointModel.from_json(model_path)
+    omega = 2 * np.pi * 99.5
+    assert model.effects == ["linear_stiffness", "viscous_damping"]
+    assert model.coefficient("linear_stiffness") == pytest.approx(omega**2, rel=1e-3)
+    assert model.coefficient("viscous_damping") == pytest.approx(2 * ZETA * omega, rel=2e-2)
+
+    crit = tmp_path / "crit"
+    assert main(["criticize", str(hand_made), "--model", str(model_path), "--out", str(crit)]) == 0
+    assert json.loads((crit / "criticism.json").read_text())["significant"] is False
+
+
+def test_rig_campaign_through_every_stage(rig_campaign, tmp_path):
+    assert main(["backbones", str(rig_campaign)]) == 0
+    assert (rig_campaign / "backbones.csv").exists()
+
+    model = tmp_path / "model.json"
+    effects = "linear_stiffness,viscous_damping,cubic_stiffness"
+    assert main(["identify", str(rig_campaign), "--effects", effects, "--out", str(model)]) == 0
+
+    surrogate = tmp_path / "surrogate"
+    argv = ["train-surrogate", str(rig_campaign), "--model", str(model), "--out", str(surrogate)]
+    assert main([*argv, "--curves", "80", "--epochs", "40"]) == 0
+    assert (surrogate / "surrogate.onnx").exists()
+
+    posterior = tmp_path / "posterior.nc"
+    argv = ["update", str(rig_campaign / "backbones.csv"), "--forward", "surrogate"]
+    argv += ["--surrogate", str(surrogate), "--out", str(posterior)]
+    argv += ["--sampler", "demetropolisz"]
+    assert main([*argv, "--draws", "400", "--tune", "400", "--chains", "1"]) == 0
+
+    crit = tmp_path / "criticism"
+    assert main(["criticize", str(rig_campaign), "--model", str(model), "--out", str(crit)]) == 0
+    ranking = json.loads((crit / "criticism.json").read_text())["ranking"]
+    assert ranking and ranking[0]["effect"] == "microslip"  # the rig's hidden joint physics
+
+    out = tmp_path / "report"
+    argv = ["report", str(rig_campaign / "backbones.csv"), "--posterior", str(posterior)]
+    assert main([*argv, "--criticism", str(crit), "--out", str(out)]) == 0
+    index = out / "index.html"
+    assert index.exists()
+    assert missing_links(index) == []
+    assert "<img" in index.read_text()
+
+
+def test_demo_runs_end_to_end_at_small_size(tmp_path):
+    done = subprocess.run(
+        [sys.executable, "-m", "pm_joint.cli", "demo", "--size", "small", "--out", str(tmp_path)],
+        capture_output=True, text=True, timeout=1200,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-3000:]
+    index = tmp_path / "index.html"
+    assert missing_links(index) == []
+    page = index.read_text()
+    for section in ("SINDy identification", "Neural surrogate", "Stochastic updating",
+                    "PDFs at low, mid and high amplitude", "Model criticism"):  # fmt: skip
+        assert section in page
