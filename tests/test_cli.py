@@ -21,6 +21,7 @@ from pm_joint.html import missing_links
 
 FS = 10_000.0
 ZETA = 0.005
+LEVELS = [0.5, 0.8, 1.3, 2.0, 3.0, 4.5]  # shaker volts
 SHAPE = np.sin(np.pi * np.linspace(0.15, 0.85, 5))[:, None] * np.array([0.9, 1.0, 0.9])
 
 
@@ -66,11 +67,11 @@ def _write_hand_made_record(folder: Path, name: str, f0: float, levels: list[flo
 def hand_made(tmp_path_factory):
     folder = tmp_path_factory.mktemp("hand_made")
     steps = []
-    for i, value in enumerate([0.5, 0.8, 1.3, 2.0, 3.0, 4.5]):  # holds after 0.1 s ramps
+    for i, value in enumerate(LEVELS):  # holds after 0.1 s ramps
         steps += [f"{i * 1.0 + (0.1 if i else 0):.6f} {value}", f"{i + 1.0 - 1e-4:.6f} {value}"]
     (folder / "Config7_PRT_amplitude_steps.txt").write_text("\n".join(steps) + "\n")
     for k, f0 in enumerate([99.5, 100.0, 100.5], start=1):
-        _write_hand_made_record(folder, f"Config7_PRT_Assemb{k}", f0, [0.5, 0.8, 1.3, 2.0, 3.0, 4.5])
+        _write_hand_made_record(folder, f"Config7_PRT_Assemb{k}", f0, LEVELS)
     return folder
 
 
