@@ -380,6 +380,37 @@ class HoldPoint:
     periods: int
 
 
+def hold_window(
+    time_s: np.ndarray, frequency_hz: np.ndarray, n_periods: int
+) -> tuple[int, np.ndarray, float]:
+    """The last ``n_periods`` periods of a hold: first sample, phase from 0, mean ω.
+
+    The phase is ``2π ∫ f dt`` of the instantaneous-frequency channel, so the
+    window spans whole periods of the excitation even while the PLL moves.
+
+    Raises
+    ------
+    ValueError
+        If the frequency channel is not positive; :class:`ShortHoldError` if the
+        hold has fewer than ``n_periods`` periods.
+    """
+    if (frequency_hz <= 0).any():
+        raise ValueError("the frequency channel is not positive")
+    phase = 2 * np.pi * cumulative_trapezoid(frequency_hz, time_s, initial=0.0)
+    periods = (phase[-1] - phase[0]) / (2 * np.pi)
+    if periods < n_periods:
+        raise ShortHoldError(periods, n_periods)
+    start = int(np.searchsorted(phase, phase[-1] - 2 * np.pi * n_periods, side="right") - 1)
+    phi = phase[start:] - phase[start]
+    return start, phi, float(phi[-1] / (time_s[-1] - time_s[start]))
+
+
+def fourier_basis(phi: np.ndarray, harmonics: int) -> np.ndarray:
+    """Columns ``[1, cos kφ…, sin kφ…]`` for ``k = 1..harmonics``."""
+    k = np.arange(1, harmonics + 1)
+    return np.column_stack([np.ones_like(phi), np.cos(np.outer(phi, k)), np.sin(np.outer(phi, k))])
+
+
 def hold_point(
     time_s: np.ndarray,
     excitation_velocity: np.ndarray,
@@ -408,18 +439,8 @@ def hold_point(
         If the frequency channel is not positive or the hold holds fewer than
         ``n_periods`` periods.
     """
-    if (frequency_hz <= 0).any():
-        raise ValueError("the frequency channel is not positive")
-    phase = 2 * np.pi * cumulative_trapezoid(frequency_hz, time_s, initial=0.0)
-    periods = (phase[-1] - phase[0]) / (2 * np.pi)
-    if periods < n_periods:
-        raise ShortHoldError(periods, n_periods)
-    start = np.searchsorted(phase, phase[-1] - 2 * np.pi * n_periods, side="right") - 1
-    t = time_s[start:]
-    phi = phase[start:] - phase[start]
-    omega = phi[-1] / (t[-1] - t[0])
-    k = np.arange(1, harmonics + 1)
-    basis = np.column_stack([np.ones_like(phi), np.cos(np.outer(phi, k)), np.sin(np.outer(phi, k))])
+    start, phi, omega = hold_window(time_s, frequency_hz, n_periods)
+    basis = fourier_basis(phi, harmonics)
     signals = np.column_stack([excitation_velocity[start:], response_velocity[start:]])
     coef = np.linalg.lstsq(basis, signals, rcond=None)[0]
     # v = a cos φ + b sin φ = Re((a − ib) e^{iφ})

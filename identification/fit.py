@@ -34,10 +34,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.integrate import cumulative_trapezoid
 from scipy.optimize import least_squares
 
-from identification.backbone import BackboneSet
+from identification.backbone import BackboneSet, ShortHoldError, fourier_basis, hold_window
 from identification.effects import CATALOGUE, get_effect
 from identification.harmonic import backbone
 from identification.model import JointModel
@@ -119,20 +118,18 @@ def _hold_harmonics(
 ) -> tuple[float, np.ndarray, np.ndarray]:
     """Fundamental amplitude, relative harmonics and their standard errors of one hold.
 
-    The same window and phase as :func:`identification.backbone.hold_point` (whose fit
-    keeps the harmonics to itself): the last ``n_periods`` periods of the phase
-    ``2π ∫ f dt``, a constant plus ``harmonics`` harmonics fitted to the velocity.
+    The window of :func:`identification.backbone.hold_window` (the one backbone
+    points use), a constant plus ``harmonics`` harmonics fitted to the velocity.
     The displacement's mean is not observable from velocities, so only ``h ≥ 1``.
     """
-    phase = 2 * np.pi * cumulative_trapezoid(frequency_hz, time_s, initial=0.0)
-    periods = min(n_periods, int((phase[-1] - phase[0]) / (2 * np.pi)))
-    if periods < 1:
-        raise ValueError("the hold phase is shorter than one period")
-    start = np.searchsorted(phase, phase[-1] - 2 * np.pi * periods, side="right") - 1
-    phi = phase[start:] - phase[start]
-    omega = phi[-1] / (time_s[-1] - time_s[start])
+    try:
+        start, phi, omega = hold_window(time_s, frequency_hz, n_periods)
+    except ShortHoldError as short:  # use the whole periods there are
+        if short.periods < 1:
+            raise ValueError("the hold phase is shorter than one period") from None
+        start, phi, omega = hold_window(time_s, frequency_hz, int(short.periods))
     k = np.arange(1, harmonics + 1)
-    basis = np.column_stack([np.ones_like(phi), np.cos(np.outer(phi, k)), np.sin(np.outer(phi, k))])
+    basis = fourier_basis(phi, harmonics)
     coef, *_ = np.linalg.lstsq(basis, response_velocity[start:], rcond=None)
     dof = max(phi.size - basis.shape[1], 1)
     variance = np.sum((response_velocity[start:] - basis @ coef) ** 2) / dof
