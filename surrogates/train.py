@@ -54,7 +54,8 @@ class TrainingConfig:
     on plateaus, down to 1 % of it (None: the paper's constant rate). The
     defaults (400 + 400 + 200 epochs with the decay) are as accurate on the
     trc-like benchmark (``bench/surrogate.py``) as 3000 constant-rate epochs per
-    stage with early stopping, in about a quarter of the time.
+    stage with early stopping, in about a quarter of the time. ``threads`` sets
+    torch's CPU threads for the training (None: leave torch's setting).
     """
 
     net: NetConfig = field(default_factory=NetConfig)
@@ -70,6 +71,7 @@ class TrainingConfig:
     output_scaling: Literal["level", "channel"] = "level"
     seed: int = 0
     device: str | None = None
+    threads: int | None = 1
     progress: bool = True
 
     def __post_init__(self) -> None:
@@ -210,6 +212,10 @@ def train_surrogate(
     if len(x) - n_validation < 2:
         raise ValueError(f"{len(x)} curves are too few to train and validate on")
     device = torch.device(config.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    if config.threads is not None:
+        # These nets are small: extra CPU threads only add synchronisation, and
+        # on a busy machine OpenMP's spinning threads slow training tenfold.
+        torch.set_num_threads(config.threads)
     start = time.perf_counter()
 
     rng = np.random.default_rng(config.seed)
