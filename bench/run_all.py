@@ -1,0 +1,155 @@
+"""Run the benchmark scripts and write BENCHMARKS.md (and the README's table).
+
+Each script in ``bench/`` ends by printing one JSON line of figures; this
+script runs them (all, or those named with ``--only``), keeps each JSON in
+``bench/results/NAME.json``, and builds the tables from those files, so the
+tables are generated, never typed. The README's table sits between the
+``<!-- benchmarks:start -->`` and ``<!-- benchmarks:end -->`` markers.
+
+    python bench/run_all.py                 # every benchmark (about 30 min)
+    python bench/run_all.py --only pll      # one benchmark, the rest from bench/results
+    python bench/run_all.py --tables-only   # rebuild the tables from bench/results
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "bench" / "results"
+SCRIPTS = ("harmonic", "pll", "identify", "surrogate", "sampling", "criticism", "records")
+
+#: (figure, script, key in its JSON, unit, target, the paper's value)
+HEADLINES = (
+    ("Harmonic balance: 1000 backbones × 41 amplitudes, single harmonic", "harmonic",
+     "single_1000x41_ms", "ms", "≤ 50 ms", "—"),
+    ("Harmonic balance: 1000 × 41, H = 5 (AFT)", "harmonic", "multi_h5_1000x41_s", "s",
+     "≤ 5 s", "—"),
+    ("PLL backbone, 41 levels, one core", "pll", "backbone_s", "s", "≤ 0.1 s",
+     "Simulink, \"computationally exhaustive\""),
+    ("PLL batch: 500 backbones, 2 cores", "pll", "batch_500_s", "s", "≤ 40 s", "—"),
+    ("SINDy from 60 s of 10 kHz records, paper library", "identify", "paper_library_s", "s",
+     "≤ 10 s", "—"),
+    ("Surrogate: test Pearson, lowest channel", "surrogate", "pearson_min_channel", "",
+     "≥ 0.999", "0.9975"),
+    ("Surrogate: test frequency MAPE", "surrogate", "mape_frequency_pct", "%", "≤ 0.1 %", "—"),
+    ("Surrogate: test MSE, amplitude", "surrogate", "mse_amplitude_mm2", "mm²", "—",
+     "5.119e-6 mm²"),
+    ("Surrogate: 100 predictions (onnxruntime, 1 thread)", "surrogate", "predict_100_ms", "ms",
+     "≤ 4 ms", "407.3 ms"),
+    ("Surrogate: training, 500 curves, CPU", "surrogate", "train_s", "s", "≤ 300 s", "—"),
+    ("MCMC: PyMC Metropolis, 30 000 draws, SurrogateOp", "sampling", "metropolis_wall_s", "s",
+     "≤ 120 s", "≈ 11 min"),
+    ("MCMC: best sampler, ESS/s relative to Metropolis", "sampling", "best_ess_per_s_ratio", "×",
+     "≥ 10×", "—"),
+    ("Criticism: 5 records → ranked missing effects", "criticism", "total_s", "s", "≤ 60 s", "—"),
+    ("Records: read throughput, 500 MB file", "records", "read_mb_s", "MB/s", "≥ 100 MB/s", "—"),
+    ("Records: peak memory / numeric array", "records", "peak_over_array", "×", "≤ 3", "—"),
+)  # fmt: skip
+
+
+def run(name: str) -> dict:
+    """Run ``bench/NAME.py``; its last output line is its JSON."""
+    script = ROOT / "bench" / f"{name}.py"
+    print(f"== {name}", flush=True)
+    start = time.perf_counter()
+    done = subprocess.run(
+        [sys.executable, str(script)], cwd=ROOT, text=True, stdout=subprocess.PIPE
+    )
+    print(done.stdout, end="")
+    if done.returncode != 0:
+        raise SystemExit(f"bench/{name}.py failed with exit code {done.returncode}")
+    figures = json.loads(done.stdout.strip().splitlines()[-1])
+    figures["_run"] = {
+        "seconds": round(time.perf_counter() - start, 1),
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+    }
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / f"{name}.json").write_text(json.dumps(figures, indent=1) + "\n")
+    return figures
+
+
+def _value(figures: dict | None, key: str) -> str:
+    if figures is None or key not in figures:
+        return "not run"
+    value = figures[key]
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+
+def headline_table(results: dict[str, dict]) -> str:
+    lines = ["| figure | ours | target | paper |", "|---|---|---|---|"]
+    for label, script, key, unit, target, paper in HEADLINES:
+        value = _value(results.get(script), key)
+        shown = f"{value} {unit}".strip() if value != "not run" else value
+        lines.append(f"| {label} | {shown} | {target} | {paper} |")
+    return "\n".join(lines)
+
+
+def table5(results: dict[str, dict]) -> str:
+    surrogate = results.get("surrogate")
+    if not surrogate or "table5" not in surrogate:
+        return "_Table 5 study not run._"
+    paper = surrogate.get("paper", {}).get("table5", {})
+    lines = [
+        "| training curves | MSE (mm²) ours | MSE (mm²) paper | MAE (mm) ours | MAE (mm) paper "
+        "| frequency MAPE (%) ours | lowest Pearson ours |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in surrogate["table5"]:
+        size = str(row.get("size") or row.get("n_train"))
+        mse, mae, _ = paper.get(size, ("—", "—", "—"))  # the paper's (MSE, MAE, MAPE)
+        lines.append(
+            f"| {size} | {row.get('mse_amplitude_mm2', float('nan')):.3g} | {mse} "
+            f"| {row.get('mae_amplitude_mm', float('nan')):.3g} | {mae} "
+            f"| {row.get('mape_frequency_pct', float('nan')):.3g} "
+            f"| {row.get('pearson_min_channel', float('nan')):.5f} |"
+        )
+    return "\n".join(lines)
+
+
+def write_tables(results: dict[str, dict]) -> None:
+    runs = "\n".join(
+        f"- `bench/{name}.py`: {run['date']}, {run['seconds']} s, {run['machine']}"
+        for name, run in ((n, r["_run"]) for n, r in results.items() if "_run" in r)
+    )
+    headline = headline_table(results)
+    text = (
+        "# Benchmarks\n\n"
+        "Generated by `python bench/run_all.py` from the JSON line each script in `bench/` "
+        "prints (kept in `bench/results/`); do not edit by hand.\n\n"
+        f"{headline}\n\n## Table 5 of the paper, repeated\n\n{table5(results)}\n\n"
+        f"## Runs\n\n{runs}\n"
+    )
+    (ROOT / "BENCHMARKS.md").write_text(text)
+    readme = ROOT / "README.md"
+    content = readme.read_text()
+    start, end = "<!-- benchmarks:start -->", "<!-- benchmarks:end -->"
+    if start in content and end in content:
+        before, rest = content.split(start, 1)
+        after = rest.split(end, 1)[1]
+        readme.write_text(f"{before}{start}\n{headline}\n{end}{after}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", nargs="*", choices=SCRIPTS, help="benchmarks to run")
+    parser.add_argument("--tables-only", action="store_true", help="run nothing")
+    args = parser.parse_args()
+    chosen = [] if args.tables_only else (args.only or list(SCRIPTS))
+    for name in chosen:
+        run(name)
+    results = {path.stem: json.loads(path.read_text()) for path in sorted(RESULTS.glob("*.json"))}
+    write_tables(results)
+    print(f"wrote BENCHMARKS.md from {len(results)} result file(s)")
+
+
+if __name__ == "__main__":
+    main()
