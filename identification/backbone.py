@@ -445,6 +445,8 @@ def hold_point(
     coef = np.linalg.lstsq(basis, signals, rcond=None)[0]
     # v = a cos φ + b sin φ = Re((a − ib) e^{iφ})
     base, relative = coef[1] - 1j * coef[1 + harmonics]
+    if relative == 0 or base == 0:
+        raise ValueError("no measurable response (zero fundamental)")
     ratio = relative / base
     phase_error = np.degrees(np.angle(ratio * 1j))  # arg(V/V_b) + 90°, wrapped
     damping = np.real(-1j * base * np.conj(relative)) / (2 * abs(relative) ** 2)

@@ -200,10 +200,21 @@ class SurrogateSpec:
         missing = [k for k in ("parameter_names", "bounds", "levels", "channels") if k not in data]
         if missing:
             raise ValueError(f"surrogate spec lacks {', '.join(missing)}")
+        for key in ("parameter_names", "channels"):
+            if not isinstance(data[key], list | tuple):
+                raise ValueError(f"surrogate spec: {key} must be a list, got {data[key]!r}")
+        arrays = {}
+        for key in ("bounds", "levels"):
+            try:
+                arrays[key] = np.asarray(data[key], dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"surrogate spec: {key} must be numbers, got {data[key]!r}"
+                ) from None
         return cls(
             parameter_names=tuple(data["parameter_names"]),
-            bounds=np.asarray(data["bounds"], dtype=np.float64),
-            levels=np.asarray(data["levels"], dtype=np.float64),
+            bounds=arrays["bounds"],
+            levels=arrays["levels"],
             channels=tuple(data["channels"]),
             level_unit=data.get("level_unit", "m/s^2"),
         )
@@ -240,16 +251,21 @@ class SurrogateRuntime:
         extrapolate: Extrapolate = "raise",
         threads: int = 1,
     ) -> None:
-        if metadata.get("format") != FORMAT:
+        if not isinstance(metadata, Mapping) or metadata.get("format") != FORMAT:
+            found = metadata.get("format") if isinstance(metadata, Mapping) else metadata
+            raise ValueError(f"{source}: not a {FORMAT} sidecar (format {found!r})")
+        version = metadata.get("format_version", 0)
+        if not isinstance(version, int) or isinstance(version, bool):
+            raise ValueError(f"{source}: format_version must be an integer, got {version!r}")
+        if version > FORMAT_VERSION:
             raise ValueError(
-                f"{source}: not a {FORMAT} sidecar (format {metadata.get('format')!r})"
-            )
-        if metadata.get("format_version", 0) > FORMAT_VERSION:
-            raise ValueError(
-                f"{source}: format version {metadata['format_version']} is newer "
+                f"{source}: format version {version} is newer "
                 f"than this pm-joint reads ({FORMAT_VERSION})"
             )
-        expected = metadata.get("onnx", {}).get("sha256")
+        graph_entry = metadata.get("onnx", {})
+        if not isinstance(graph_entry, Mapping):
+            raise ValueError(f"{source}: sidecar entry 'onnx' must be an object")
+        expected = graph_entry.get("sha256")
         actual = sha256_bytes(model_bytes)
         if expected != actual:
             raise ValueError(
@@ -307,7 +323,10 @@ class SurrogateRuntime:
         self.__dict__.update(state)
 
     def _check_graph(self) -> None:
-        inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
+        try:
+            inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
+        except Exception as error:  # onnxruntime raises its own types for unreadable graphs
+            raise ValueError(f"{self.source}: onnxruntime cannot load the graph: {error}") from None
         spec = self.spec
         problem = None
         if len(inputs) != 1 or len(outputs) != 1:

@@ -320,8 +320,6 @@ def synthetic_records(draw):
     return record, holds, corruption, target
 
 
-# backbone.hold_point divides 0 by 0 for a zero response before the check that names it
-@pytest.mark.filterwarnings("ignore:invalid value encountered in scalar divide:RuntimeWarning")
 @PROPERTY
 @given(case=synthetic_records(), strict=st.booleans())
 @counted
@@ -536,12 +534,6 @@ def test_spec_numbers_are_checked(key, index, value):
     assert isinstance(outcome, SurrogateSpec) == valid, outcome
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=TypeError,
-    reason="surrogates/runtime.py SurrogateSpec.from_dict: a non-iterable parameter_names "
-    "or channels (e.g. 5) raises TypeError, a dict in bounds TypeError, not a ValueError",
-)
 @PROPERTY
 @given(key=st.sampled_from(SPEC_KEYS), value=json_values)
 @example(key="parameter_names", value=5)
@@ -551,12 +543,6 @@ def test_spec_fields_of_any_json_type_are_a_spec_or_a_named_error(key, value):
     assert isinstance(outcome, SurrogateSpec | ValueError)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=(AttributeError, TypeError),
-    reason="surrogates/runtime.py SurrogateRuntime: a sidecar whose top level or 'onnx' entry "
-    "is not an object raises AttributeError, a non-integer format_version TypeError",
-)
 @PROPERTY
 @given(key=st.sampled_from(["format", "format_version", "onnx", *SPEC_KEYS]), value=json_values)
 @example(key="onnx", value="surrogate.onnx")
@@ -594,12 +580,6 @@ def test_truncated_or_altered_surrogate_files_are_refused(surrogate_folder, tmp_
         assert "hash mismatch" in str(caught.value)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="surrogates/runtime.py SurrogateRuntime: a graph onnxruntime cannot load (whose "
-    "hash matches, e.g. written by a newer exporter) raises onnxruntime's own exception, "
-    "not a ValueError naming the file",
-)
 @PROPERTY
 @given(graph=st.binary(min_size=1, max_size=64))
 @example(graph=b"not an onnx graph")
