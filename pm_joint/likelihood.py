@@ -19,16 +19,19 @@ import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import pymc as pm
 import pytensor.tensor as pt
 from numpy.typing import ArrayLike
 from pytensor.graph.basic import Apply
 from pytensor.graph.op import Op
+from pytensor.link.numba.dispatch.basic import numba_njit, register_funcify_default_op_cache_key
 from scipy import stats
+from sklearn.covariance import ledoit_wolf_shrinkage
 
 from identification.backbone import BackboneSet
-from pm_joint.fitting import CANDIDATES, DistributionFit, fit_best
+from pm_joint.fitting import UNBOUNDED_CANDIDATES, DistributionFit, fit_best
 from pm_joint.ops import BACKBONE_COLUMNS
 
 __all__ = [
@@ -133,8 +136,8 @@ class BackboneDensity:
         *,
         channels: Sequence[str] = ("frequency_hz",),
         family: str = "copula",
-        candidates: tuple[str, ...] = CANDIDATES,
-        shrinkage: float = 0.05,
+        candidates: tuple[str, ...] = UNBOUNDED_CANDIDATES,
+        shrinkage: float | None = None,
     ) -> BackboneDensity:
         """Fit the joint density to measured backbones.
 
@@ -150,10 +153,14 @@ class BackboneDensity:
         family
             ``"copula"`` or ``"mvn"``.
         candidates
-            scipy.stats families tried for each marginal (copula).
+            scipy.stats families tried for each marginal (copula), ranked by AICc;
+            unbounded ones by default, so a prediction just beyond the measured
+            values is unlikely rather than impossible.
         shrinkage
-            Weight of the identity in the correlation estimate; keeps it well
-            conditioned with few curves and many levels.
+            Weight of the diagonal in the covariance (or correlation) estimate;
+            default: the Ledoit–Wolf optimum for the number of curves and
+            levels, which keeps the joint density well conditioned when there
+            are few curves for many levels.
         """
         channels = tuple(channels)
         for channel in channels:
@@ -176,14 +183,16 @@ class BackboneDensity:
         identity = np.eye(values.shape[1])
         if family == "mvn":
             cov = np.cov(values, rowvar=False)
-            cov = (1 - shrinkage) * cov + shrinkage * np.diag(np.diag(cov))
+            weight = _shrinkage(values) if shrinkage is None else shrinkage
+            cov = (1 - weight) * cov + weight * np.diag(np.diag(cov))
             return cls(amplitudes_m, channels, values, family, (), cov, values.mean(axis=0))
-        marginals = tuple(fit_best(column, candidates)[0] for column in values.T)
+        marginals = tuple(fit_best(column, candidates, "aicc")[0] for column in values.T)
         scores = np.column_stack(
             [_normal_scores(m, column) for m, column in zip(marginals, values.T, strict=True)]
         )
         corr = np.corrcoef(scores, rowvar=False)
-        corr = (1 - shrinkage) * corr + shrinkage * identity
+        weight = _shrinkage(scores) if shrinkage is None else shrinkage
+        corr = (1 - weight) * corr + weight * identity
         return cls(amplitudes_m, channels, values, family, marginals, corr, np.empty(0))
 
     @property
@@ -229,13 +238,25 @@ class BackboneDensity:
         return {c: y[..., i * n : (i + 1) * n] for i, c in enumerate(self.channels)}
 
 
+def _shrinkage(values: np.ndarray) -> float:
+    """Ledoit–Wolf shrinkage weight of standardised columns (toward the identity)."""
+    standardised = (values - values.mean(0)) / values.std(0)
+    return float(ledoit_wolf_shrinkage(standardised, assume_centered=True))
+
+
+#: Log-probabilities are floored here before Φ⁻¹ (|z| ≤ 37): far beyond the
+#: measured spread the marginal log density already decides, and a tail
+#: probability that underflows to 0 would turn a poor fit into logp = -inf.
+_LOG_TAIL_FLOOR = -700.0
+
+
 def _normal_scores(fit: DistributionFit, values: np.ndarray) -> np.ndarray:
     """Φ⁻¹(F(y)) through log-probabilities, accurate in both tails."""
     dist = fit.dist
+    lower = np.maximum(dist.logcdf(values), _LOG_TAIL_FLOOR)
+    upper = np.maximum(dist.logsf(values), _LOG_TAIL_FLOOR)
     return np.where(
-        dist.cdf(values) < 0.5,
-        stats.norm.ppf(np.exp(dist.logcdf(values))),
-        -stats.norm.ppf(np.exp(dist.logsf(values))),
+        lower < np.log(0.5), stats.norm.ppf(np.exp(lower)), -stats.norm.ppf(np.exp(upper))
     )
 
 
@@ -273,6 +294,8 @@ def _marginal_graph(fit: DistributionFit, y):
 def _normal_score_graph(logcdf, logsf):
     # Φ⁻¹(u) = −√2 erfcinv(2u): from the lower tail below the median, from the
     # upper tail above it, so neither branch loses precision.
+    logcdf = pt.maximum(logcdf, _LOG_TAIL_FLOOR)
+    logsf = pt.maximum(logsf, _LOG_TAIL_FLOOR)
     lower = -np.sqrt(2.0) * pt.erfcinv(2.0 * pt.exp(logcdf))
     upper = np.sqrt(2.0) * pt.erfcinv(2.0 * pt.exp(logsf))
     return pt.switch(logcdf < np.log(0.5), lower, upper)
@@ -304,6 +327,7 @@ class NanCounter(Op):
     A forward model that fails for some parameter vector returns NaN; the
     likelihood turns that into logp = -inf so a chain rejects the proposal
     and goes on. This Op keeps the count (per process) so it can be reported.
+    Under the numba backend it runs natively (see :func:`_numba_nan_counter`).
     """
 
     __props__ = ("label",)
@@ -320,19 +344,40 @@ class NanCounter(Op):
     def perform(self, node, inputs, outputs):
         (x,) = inputs
         if np.isnan(x).any():
-            n = NanCounter.counts.get(self.label, 0) + 1
-            NanCounter.counts[self.label] = n
-            if n in (1, 10, 100, 1000) or n % 10_000 == 0:
-                warnings.warn(
-                    f"{self.label}: forward model returned NaN {n} time(s); "
-                    "those proposals get logp = -inf",
-                    RuntimeWarning,
-                    stacklevel=2,
-                )
+            _count_nan(self.label)
         outputs[0][0] = np.array(x, copy=True)
 
     def pullback(self, inputs, outputs, cotangents):
         return [cotangents[0]]
+
+
+def _count_nan(label: str) -> None:
+    """One more NaN output under ``label``; warn at 1, 10, 100, 1000 and every 10 000."""
+    n = NanCounter.counts.get(label, 0) + 1
+    NanCounter.counts[label] = n
+    if n in (1, 10, 100, 1000) or n % 10_000 == 0:
+        warnings.warn(
+            f"{label}: forward model returned NaN {n} time(s); those proposals get logp = -inf",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+
+
+@register_funcify_default_op_cache_key(NanCounter)
+def _numba_nan_counter(op, node=None, **kwargs):
+    # Python's perform would run in numba object mode: a per-call toll and, worse,
+    # a compiled logp that numba cannot cache. Natively, only the rare NaN call
+    # drops to object mode to count.
+    label = op.label
+
+    @numba_njit
+    def nan_counter(x):
+        if np.isnan(x).any():
+            with numba.objmode():
+                _count_nan(label)
+        return x.copy()
+
+    return nan_counter
 
 
 def interpolate_backbone(backbone, amplitudes_m: ArrayLike, channels: Sequence[str]):
@@ -395,8 +440,9 @@ def BackboneAmplitude(
     stored as the deterministic ``{name}_predicted``.
     """
     density = density or BackboneDensity.fit(observed, levels, channels=channels, family=family)
-    predicted = interpolate_backbone(
-        NanCounter(name)(backbone), density.amplitudes_m, density.channels
+    # Counted at the levels: NaN there (and only there) is what makes logp = -inf.
+    predicted = NanCounter(name)(
+        interpolate_backbone(backbone, density.amplitudes_m, density.channels)
     )
     predicted = pm.Deterministic(f"{name}_predicted", predicted)
     n_curves = density.observations.shape[0]

@@ -149,3 +149,15 @@ def test_nan_prediction_gives_minus_inf_and_is_counted(measured):
         assert f(np.full(density.n_dims, np.nan)) == -np.inf
     assert NanCounter.counts["test-nan"] == before + 1
     assert any("returned NaN" in str(w.message) for w in caught)
+
+
+def test_far_predictions_are_unlikely_not_impossible(measured):
+    """A tail probability that underflows must not make a poor prediction impossible."""
+    density = BackboneDensity.fit(measured, candidates=("gumbel_l",))
+    centre = density.observations.mean(axis=0)
+    spread = density.observations.std(axis=0)
+    v = pt.vector("v")
+    graph = pytensor.function([v], logp_graph(density, v))
+    values = [float(graph(centre + k * spread)) for k in (0, 10, 60)]
+    assert np.all(np.isfinite(values)) and values[0] > values[1] > values[2]
+    np.testing.assert_allclose(values, density.logpdf([centre + k * spread for k in (0, 10, 60)]))

@@ -160,13 +160,6 @@ def test_surrogate_outside_its_box_is_flagged_and_gives_minus_inf(surrogate, toy
     assert op.n_failed == 1
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="pm_joint/likelihood.py BackboneAmplitude: NanCounter looks at the whole "
-    "(n, 3) backbone, whose damping column is NaN for a surrogate that predicts amplitude "
-    "and frequency only, so every evaluation inside the box is counted (and warned) as a "
-    "forward-model failure",
-)
 def test_a_surrogate_inside_its_box_is_not_counted_as_a_failure(surrogate, toy_measured):
     pm_model = build_model(
         None, toy_measured, forward="surrogate", surrogate=surrogate, family="mvn"

@@ -1,0 +1,396 @@
+"""Stochastic updating: forward-model switch, acceptance on a rig campaign, calibration,
+bad input, NaN regions and interrupted runs.
+
+Independent expectations: the PLL simulator and harmonic balance against each
+other and against the surrogate's own validation error; the rig's ground truth
+(the population it drew the assemblies from); two-sample KS tests against the
+measured curves; a standard normal for the draws of an interrupted run.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import warnings
+
+import arviz as az
+import numpy as np
+import pymc as pm
+import pytest
+import torch
+from scipy import stats
+
+from identification.backbone import Backbone, BackboneSet, extract_backbones
+from identification.harmonic import backbone
+from identification.model import JointModel
+from identification.pll import pll_backbones
+from identification.rig import RIG_PRESETS, Rig, read_ground_truth
+from pm_joint.likelihood import NanCounter, amplitude_levels, level_marks
+from pm_joint.ops import HarmonicBalanceOp, PLLOp, SurrogateOp
+from pm_joint.updating import (
+    build_model,
+    hierarchical_model,
+    load_posterior,
+    population_coverage,
+    sample,
+    save_posterior,
+    synthetic_campaign,
+)
+from surrogates import (
+    NetConfig,
+    SurrogateRuntime,
+    TrainingConfig,
+    export_surrogate,
+    train_surrogate,
+)
+from surrogates.dataset import generate_dataset
+
+torch.set_num_threads(1)
+# Python-perform Ops (surrogate, PLL) run in numba object mode; pytensor says so on compile.
+pytestmark = pytest.mark.filterwarnings("ignore:Numba will use object mode:UserWarning")
+
+W0 = 2 * np.pi * 100.0
+DUFFING = JointModel(
+    {"linear_stiffness": W0**2, "viscous_damping": 2 * 0.004 * W0, "cubic_stiffness": 1e10}
+)
+NAMES = ["linear_stiffness", "cubic_stiffness"]
+BOUNDS = {"linear_stiffness": (0.97 * W0**2, 1.03 * W0**2), "cubic_stiffness": (5e9, 1.5e10)}
+#: Base-acceleration levels of the surrogate (m/s²): about 0.08–1.7 mm on the Duffing panel.
+SURROGATE_LEVELS = np.geomspace(0.25, 6.0, 16)
+
+
+def _duffing_curves(n=6, seed=0):
+    """Harmonic-balance backbones of ``n`` Duffing assemblies around the template."""
+    rng = np.random.default_rng(seed)
+    values = np.column_stack(
+        [W0**2 * (1 + 0.005 * rng.standard_normal(n)), 1e10 * (1 + 0.2 * rng.standard_normal(n))]
+    )
+    amplitudes = 1e-3 * np.geomspace(0.1, 1.5, 12)
+    hb = backbone(DUFFING, amplitudes, parameters=values, names=NAMES)
+    return BackboneSet(
+        Backbone(amplitudes, f, d, label=f"duffing{i}")
+        for i, (f, d) in enumerate(zip(hb.frequency_hz, hb.damping_ratio, strict=True))
+    )
+
+
+@pytest.fixture(scope="module")
+def duffing_surrogate(tmp_path_factory):
+    """A small surrogate of the Duffing panel over BOUNDS (trained in about 10 s)."""
+    data = generate_dataset(
+        DUFFING, NAMES, 200, bounds=BOUNDS, levels=SURROGATE_LEVELS, progress=False
+    )
+    net = NetConfig(latent_dim=8, conv_filters=(8, 8), ffnn_width=64, ffnn_depth=2)
+    config = TrainingConfig(net=net, max_epochs=150, finetune_epochs=150, progress=False)
+    trained = train_surrogate(data.X, data.Y, data.spec, config)
+    folder = export_surrogate(trained, tmp_path_factory.mktemp("duffing_surrogate"))
+    return trained, SurrogateRuntime.load(folder)
+
+
+def _predicted_at(pm_model, values):
+    """The ``backbone_predicted`` deterministic at a parameter point (physical values)."""
+    function = pm_model.compile_fn(
+        pm_model["backbone_predicted"], inputs=pm_model.free_RVs, mode="FAST_COMPILE"
+    )
+    return function(values)
+
+
+# -- one model, three forward models -----------------------------------------------
+
+
+def test_forward_models_switch_by_one_argument_and_agree(duffing_surrogate):
+    trained, runtime = duffing_surrogate
+    measured = _duffing_curves()
+    point = {"linear_stiffness": 1.004 * W0**2, "cubic_stiffness": 1.1e10}
+    predicted, ops = {}, {}
+    for forward in ("harmonic", "pll", "surrogate"):
+        pm_model = build_model(
+            DUFFING, measured, forward=forward, names=NAMES, bounds=BOUNDS,
+            surrogate=runtime, n_grid=10,
+        )  # fmt: skip
+        ops[forward] = type(pm_model.forward_op)
+        predicted[forward] = _predicted_at(pm_model, point)
+    assert ops == {"harmonic": HarmonicBalanceOp, "pll": PLLOp, "surrogate": SurrogateOp}
+    assert all(np.isfinite(values).all() for values in predicted.values())
+    # The analytical backbones: time-domain PLL against single-harmonic balance.
+    gap = np.abs(predicted["pll"] / predicted["harmonic"] - 1).max()
+    print(f"PLL against harmonic balance: {100 * gap:.3f} % at most")
+    assert gap < 3e-3
+    # The surrogate within the error it states for itself (validation curves, worst case).
+    stated = trained.metrics["channels"]["frequency_hz"]["max_ape_pct"] / 100
+    print(f"surrogate's stated frequency accuracy {100 * stated:.3f} %")
+    assert stated < 0.01
+    np.testing.assert_allclose(predicted["surrogate"], predicted["harmonic"], rtol=stated)
+
+
+# -- acceptance on a trc-like campaign ------------------------------------------------
+
+TRC = "trc-like"
+#: Test levels and the (population) seed of the campaigns below.
+RIG_LEVELS, CAMPAIGN_SEED = 12, 7
+
+
+def _population(rig):
+    """Names the rig varies, their nominal values, lognormal spreads and population means."""
+    names = sorted(rig.variability)
+    nominal = np.array([rig.model.parameters[n] for n in names])
+    spread = np.array([rig.variability[n] for n in names])
+    return names, nominal, spread, nominal * np.exp(0.5 * spread**2)
+
+
+def _campaign_by_pll(rig, assemblies=25, seed=CAMPAIGN_SEED):
+    """What the rig measures minus the file round trip: PLL backbones of its drawn assemblies."""
+    names, *_ = _population(rig)
+    models = [rig.draw(np.random.default_rng([seed, a]))[0] for a in range(1, assemblies + 1)]
+    values = np.array([[m.parameters[n] for n in names] for m in models])
+    levels = rig.shaker_gain * np.asarray(rig.levels_v)
+    result = pll_backbones(rig.model, levels, values, names, progress=False)
+    assert result.locked.all()
+    return BackboneSet(
+        Backbone(a, f, d, label=f"Assemb{i + 1}")
+        for i, (a, f, d) in enumerate(
+            zip(result.amplitude_m, result.frequency_hz, result.damping_ratio, strict=True)
+        )
+    )
+
+
+def _check_posterior_against_the_rig(rig, measured):
+    """KS at low/mid/high amplitude and the population means inside the 94 % intervals."""
+    names, nominal, spread, population_mean = _population(rig)
+    # Priors: five population spreads either side of the nominal value.
+    bounds = {
+        n: (v * np.exp(-5 * s), v * np.exp(5 * s))
+        for n, v, s in zip(names, nominal, spread, strict=True)
+    }
+    # Damping too, so that the viscous damping the rig varies is informed; the joint density
+    # is a multivariate normal over 5 levels × 2 channels, which 25 curves estimate well.
+    pm_model = build_model(
+        rig.model, measured, forward="harmonic", names=names, bounds=bounds,
+        levels=amplitude_levels(measured, n=5), channels=("frequency_hz", "damping_ratio"),
+        family="mvn",
+    )  # fmt: skip
+    idata = sample(pm_model, sampler="nuts", draws=1000, tune=500, chains=2, progressbar=False)
+    divergences = int(idata.sample_stats["diverging"].sum())
+    print(f"NUTS divergences: {divergences}")
+    assert divergences <= 10
+    levels = amplitude_levels(measured, n=5)
+    predicted = idata.posterior["backbone_predicted"].values.reshape(-1, 2 * levels.size)
+    observed = measured.frequency_matrix(levels)
+    for mark, j in level_marks(levels).items():
+        # Thinned to about the effective sample size: KS assumes independent draws.
+        result = stats.ks_2samp(predicted[::10, j], observed[:, j])
+        print(f"{mark} ({1e3 * levels[j]:.3f} mm): KS distance {result.statistic:.3f}, "
+              f"p = {result.pvalue:.3f}")  # fmt: skip
+        assert result.pvalue > 0.05, mark
+    interval = az.hdi(idata, var_names=names, prob=0.94)
+    for name, mean in zip(names, population_mean, strict=True):
+        low, high = interval[name].values
+        print(f"{name}: population mean {mean:.6g} in 94 % interval [{low:.6g}, {high:.6g}]")
+        assert low <= mean <= high, name
+
+
+def test_posterior_reproduces_a_trc_like_campaign():
+    rig = Rig.preset(TRC, levels=RIG_LEVELS)
+    _check_posterior_against_the_rig(rig, _campaign_by_pll(rig))
+
+
+@pytest.mark.slow
+def test_posterior_reproduces_trc_like_records(tmp_path):
+    """The same through the files: rig records → extracted backbones → posterior."""
+    rig = Rig.preset(TRC, levels=RIG_LEVELS)
+    campaign = rig.write_campaign(tmp_path, assemblies=25, seed=CAMPAIGN_SEED, precision=5)
+    measured = extract_backbones(campaign)
+    truth = read_ground_truth(tmp_path)
+    assert len(measured) == len(truth) == 25
+    _check_posterior_against_the_rig(rig, measured)
+
+
+# -- the hierarchical model's calibration ---------------------------------------------
+
+#: Log-locations (relative to the trc-like nominal model) and spreads of the population.
+CALIBRATION = {
+    "linear_stiffness": (0.002, 0.005),
+    "cubic_stiffness": (-0.02, 0.03),
+    "microslip.F_s": (0.05, 0.1),
+    "viscous_damping": (0.03, 0.05),
+}
+
+
+@pytest.mark.slow
+def test_hierarchical_model_intervals_hold_the_population_mean():
+    """20 synthetic campaigns: the 90 % intervals of the population mean hold the truth."""
+    log_mean, log_spread = np.array(list(CALIBRATION.values())).T
+    coverage = population_coverage(
+        RIG_PRESETS[TRC].model, list(CALIBRATION), log_mean, log_spread,
+        1e-3 * np.geomspace(0.05, 2.0, 12), n_campaigns=20, progress=False,
+    )  # fmt: skip
+    print(coverage)
+    assert 0.8 <= coverage.count / coverage.covered.size <= 1.0
+    assert coverage.divergences.max() <= 5
+
+
+def test_hierarchical_model_recovers_a_small_population():
+    """Five noisy Duffing curves: NUTS without divergences, each curve's parameters found."""
+    log_mean, log_spread = np.array([0.004, -0.1]), np.array([0.005, 0.1])
+    measured, theta = synthetic_campaign(
+        DUFFING, NAMES, log_mean, log_spread, 1e-3 * np.geomspace(0.1, 1.5, 8), n_curves=5, rng=3
+    )
+    pm_model = hierarchical_model(DUFFING, measured, NAMES)
+    idata = sample(pm_model, sampler="nuts", draws=300, tune=300, chains=2, progressbar=False)
+    assert int(idata.sample_stats["diverging"].sum()) == 0
+    per_curve = idata.posterior["theta"].values.reshape(-1, 5, 2)
+    z = (per_curve.mean(axis=0) - theta) / per_curve.std(axis=0)
+    print(f"per-curve parameters, posterior mean - truth in posterior sd: {z.round(2).tolist()}")
+    assert np.all(np.abs(z) < 4)
+
+
+# -- bad input -----------------------------------------------------------------------
+
+
+def test_curves_without_a_shared_range_and_levels_outside_it_raise():
+    measured = _duffing_curves()
+    apart = BackboneSet([*measured[:3], Backbone([2e-3, 3e-3], [110.0, 115.0], [0.004] * 2)])
+    with pytest.raises(ValueError, match="share no amplitude range"):
+        build_model(DUFFING, apart, names=NAMES, bounds=BOUNDS)
+    low, high = measured.common_range()
+    with pytest.raises(ValueError, match="outside the range all measured curves share"):
+        build_model(DUFFING, measured, names=NAMES, bounds=BOUNDS, levels=[low, 2 * high, 3 * high])
+    with pytest.raises(ValueError, match="range all measured curves share"):
+        hierarchical_model(DUFFING, measured, NAMES, levels=[0.5 * low, high])
+
+
+def test_a_surrogate_must_match_the_priors(duffing_surrogate):
+    _, runtime = duffing_surrogate
+    measured = _duffing_curves()
+    with pytest.raises(ValueError, match=r"missing \['cubic_stiffness'\]"):
+        build_model(None, measured, forward="surrogate", surrogate=runtime, names=NAMES[:1])
+    with pytest.raises(ValueError, match=r"unknown \['k3'\]"):
+        build_model(
+            None, measured, forward="surrogate", surrogate=runtime, names=["linear_stiffness", "k3"]
+        )
+    wide = {**BOUNDS, "cubic_stiffness": (1e9, 1.5e10)}
+    with pytest.raises(ValueError, match=r"'cubic_stiffness'.*leave the surrogate's training box"):
+        build_model(None, measured, forward="surrogate", surrogate=runtime, bounds=wide)
+
+
+def test_a_forward_model_without_the_levels_at_the_prior_centre_raises(duffing_surrogate):
+    measured = _duffing_curves()
+    # No positive stiffness at the centre of the box: harmonic balance gives NaN there.
+    soft = {**BOUNDS, "linear_stiffness": (-2 * W0**2, -(W0**2))}
+    with pytest.raises(ValueError, match="at the centre of the prior box"):
+        build_model(DUFFING, measured, names=NAMES, bounds=soft)
+    # A surrogate whose excitation levels do not reach the measured amplitudes.
+    _, runtime = duffing_surrogate
+    small = _duffing_curves()
+    low = BackboneSet(
+        Backbone(b.amplitude_m * 10, b.frequency_hz, b.damping_ratio, label=b.label) for b in small
+    )
+    with pytest.raises(ValueError, match="surrogate forward model at the centre"):
+        build_model(None, low, forward="surrogate", surrogate=runtime)
+
+
+def test_a_chain_through_nan_regions_completes_and_counts_them():
+    measured = _duffing_curves()
+    # Stiffness below zero in part of the box: the backbone is NaN there (no resonance).
+    bounds = {**BOUNDS, "linear_stiffness": (-0.3 * W0**2, 1.7 * W0**2)}
+    pm_model = build_model(DUFFING, measured, names=NAMES, bounds=bounds, family="mvn")
+    before = NanCounter.counts.get("backbone", 0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        idata = sample(
+            pm_model, sampler="metropolis", draws=500, tune=500, chains=1, cores=1,
+            progressbar=False,
+        )  # fmt: skip
+    counted = NanCounter.counts.get("backbone", 0) - before
+    print(f"NaN predictions counted: {counted}")
+    assert counted > 0
+    assert any("returned NaN" in str(w.message) for w in caught)
+    k = idata.posterior["linear_stiffness"].values
+    assert k.shape == (1, 500) and np.all(k > 0)  # the chain went on, never into the NaN region
+
+
+# -- sampling, traces, files ---------------------------------------------------------
+
+
+def test_unknown_sampler_and_forward_model_raise():
+    measured = _duffing_curves()
+    with pytest.raises(ValueError, match="forward must be one of"):
+        build_model(DUFFING, measured, forward="simulink")
+    with pm.Model() as pm_model:
+        pm.Normal("x")
+    with pytest.raises(ValueError, match="sampler must be one of"):
+        sample(pm_model, sampler="gibbs")
+
+
+def _normal_model():
+    with pm.Model() as pm_model:
+        x = pm.Normal("x", 0.0, 1.0, shape=2)
+        pm.Deterministic("twice", 2 * x)
+    return pm_model
+
+
+def test_a_trace_folder_reads_back_as_the_run_returned_it(tmp_path):
+    idata = sample(
+        _normal_model(), sampler="demetropolisz", draws=300, tune=100, chains=2, cores=1,
+        progressbar=False, trace=tmp_path / "run.zarr", trace_chunk=64,
+    )  # fmt: skip
+    again = load_posterior(tmp_path / "run.zarr")
+    assert again.attrs["interrupted"] == 0 and idata.attrs["sampler"] == "demetropolisz"
+    np.testing.assert_array_equal(again.posterior["x"].values, idata.posterior["x"].values)
+    np.testing.assert_allclose(idata.posterior["twice"], 2 * idata.posterior["x"])
+    assert idata.posterior.sizes == {"chain": 2, "draw": 300, "x_dim_0": 2, "twice_dim_0": 2}
+    assert "accepted" in idata.sample_stats
+    # and netCDF
+    path = save_posterior(idata, tmp_path / "posterior.nc", metadata={"sampler": "demetropolisz"})
+    loaded = load_posterior(path)
+    np.testing.assert_array_equal(loaded.posterior["x"].values, idata.posterior["x"].values)
+    with pytest.raises(FileNotFoundError):
+        load_posterior(tmp_path / "missing.nc")
+
+
+def test_a_killed_run_leaves_its_draws(tmp_path):
+    """Sampling in a child process, killed mid-run: the draws written so far read back."""
+    folder = tmp_path / "killed.zarr"
+    script = (
+        "import pymc as pm\n"
+        "from pm_joint.updating import sample\n"
+        "with pm.Model() as model:\n"
+        "    pm.Normal('x', 0.0, 1.0, shape=2)\n"
+        f"sample(model, draws=10**7, tune=200, chains=2, cores=2, progressbar=False, "
+        f"trace={str(folder)!r}, trace_chunk=100)\n"
+    )
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    # Its own session, so that the chain processes die with it.
+    child = subprocess.Popen([sys.executable, "-c", script], cwd=root, start_new_session=True)
+    try:
+        written = _wait_for_draws(folder, 1500, child)
+    finally:
+        os.killpg(child.pid, signal.SIGKILL)
+        child.wait()
+    idata = load_posterior(folder)
+    x = idata.posterior["x"].values
+    assert idata.attrs["interrupted"] == 1
+    assert x.shape[:2] == (2, written - 200) and np.isfinite(x).all()
+    # The draws are the standard normal's (Metropolis: about 1 effective draw in 5).
+    assert abs(x.mean()) < 0.25 and 0.75 < x.std() < 1.25
+
+
+def _wait_for_draws(folder, n, child, timeout_s=120.0):
+    """Poll the trace until every chain has written ``n`` steps; return how many."""
+    import zarr
+
+    start = time.monotonic()
+    while time.monotonic() - start < timeout_s:
+        assert child.poll() is None, "the sampling process ended on its own"
+        try:
+            written = int(
+                np.min(zarr.open_group(str(folder), mode="r")["_sampling_state/draw_idx"])
+            )
+        except (KeyError, ValueError, zarr.errors.GroupNotFoundError):
+            written = 0  # not created yet
+        if written >= n:
+            return written
+        time.sleep(0.2)
+    raise AssertionError(f"no {n} draws within {timeout_s} s")
