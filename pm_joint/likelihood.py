@@ -173,13 +173,24 @@ class BackboneDensity:
                 raise ValueError("amplitude levels are required when measured is a matrix")
             amplitudes_m = amplitude_levels(measured)
         amplitudes_m = np.asarray(amplitudes_m, dtype=float)
-        if amplitudes_m.ndim != 1 or not np.all(np.diff(amplitudes_m) > 0):
-            raise ValueError("amplitude levels must be a strictly increasing 1-D array")
+        if amplitudes_m.ndim != 1 or amplitudes_m.size == 0:
+            raise ValueError(f"amplitude levels must be a non-empty 1-D array, got {amplitudes_m}")
+        if not (np.all(np.diff(amplitudes_m) > 0) and amplitudes_m[0] > 0):
+            raise ValueError(
+                f"amplitude levels must be positive and strictly increasing, got {amplitudes_m}"
+            )
         values = _observations(measured, amplitudes_m, channels)
         if values.shape[0] < 3:
             raise ValueError(f"need at least 3 measured curves, got {values.shape[0]}")
         if not np.all(np.isfinite(values)):
             raise ValueError("measured values at the amplitude levels contain NaN or inf")
+        flat = np.flatnonzero(np.ptp(values, axis=0) == 0)
+        if flat.size:
+            channel, level = divmod(int(flat[0]), amplitudes_m.size)
+            raise ValueError(
+                f"every measured curve has the same {channels[channel]} at the amplitude level "
+                f"{1e3 * amplitudes_m[level]:.4g} mm: no spread to build a density from"
+            )
         identity = np.eye(values.shape[1])
         if family == "mvn":
             cov = np.cov(values, rowvar=False)

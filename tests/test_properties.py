@@ -9,9 +9,7 @@ reader, the parameters of a synthetic signal, the original of a hashed file),
 or a ValueError that names the file or field. Any other exception, or a wrong
 number, fails the property.
 
-Failures in modules owned elsewhere are marked ``xfail(strict=True)`` with the
-failing case as an explicit ``@example``, so they fail on every run until fixed
-(an unexpected pass then fails too, as a reminder to drop the mark).
+Cases these properties once found are kept as explicit ``@example``s.
 
 The number of cases each property ran is printed at the end of the module.
 """
@@ -51,7 +49,7 @@ CASES: collections.Counter[str] = collections.Counter()
 PROPERTY = settings(
     max_examples=60,
     deadline=None,
-    derandomize=True,  # the same cases on every run: CI and the strict xfails stay stable
+    derandomize=True,  # the same cases on every run, so CI is stable
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
 
@@ -637,12 +635,6 @@ def test_density_fit_is_finite_or_a_value_error(case, family):
     assert np.isfinite(logp).all()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="pm_joint/likelihood.py BackboneDensity.fit: non-positive amplitude levels are "
-    "accepted, and an mvn fit with a level where every curve has the same value succeeds "
-    "but its logpdf then raises LinAlgError 'Matrix is not positive definite' (naming no level)",
-)
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")  # the degenerate level's zero spread
 @PROPERTY
 @given(
