@@ -166,20 +166,19 @@ def _check_posterior_against_the_rig(rig, measured):
     }
     # Damping too, so that the viscous damping the rig varies is informed; the joint density
     # is a multivariate normal over 5 levels × 2 channels, which 25 curves estimate well.
+    levels = amplitude_levels(measured, n=5)
     pm_model = build_model(
-        rig.model, measured, forward="harmonic", names=names, bounds=bounds,
-        levels=amplitude_levels(measured, n=5), channels=("frequency_hz", "damping_ratio"),
-        family="mvn",
+        rig.model, measured, forward="harmonic", names=names, bounds=bounds, levels=levels,
+        channels=("frequency_hz", "damping_ratio"), family="mvn",
     )  # fmt: skip
     idata = sample(pm_model, sampler="nuts", draws=1000, tune=500, chains=2, progressbar=False)
     divergences = int(idata.sample_stats["diverging"].sum())
     print(f"NUTS divergences: {divergences}")
     assert divergences <= 10
-    levels = amplitude_levels(measured, n=5)
     predicted = idata.posterior["backbone_predicted"].values.reshape(-1, 2 * levels.size)
     observed = measured.frequency_matrix(levels)
     for mark, j in level_marks(levels).items():
-        # Thinned to about the effective sample size: KS assumes independent draws.
+        # Thinned below the effective sample size: KS assumes independent draws.
         result = stats.ks_2samp(predicted[::10, j], observed[:, j])
         print(f"{mark} ({1e3 * levels[j]:.3f} mm): KS distance {result.statistic:.3f}, "
               f"p = {result.pvalue:.3f}")  # fmt: skip
