@@ -24,8 +24,10 @@ the draws to a zarr folder as they come; :func:`save_posterior` /
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
+import tempfile
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -39,6 +41,7 @@ from numpy.typing import ArrayLike
 from pymc.blocking import DictToArrayBijection
 from pymc.stats.convergence import log_warnings, run_convergence_checks
 
+from identification.artifacts import check_sha256, versions
 from identification.backbone import Backbone, BackboneSet
 from identification.model import JointModel
 from pm_joint.likelihood import (
@@ -58,6 +61,7 @@ __all__ = [
     "hierarchical_model",
     "load_posterior",
     "population_coverage",
+    "posterior_sha256",
     "sample",
     "save_posterior",
     "synthetic_campaign",
@@ -366,14 +370,38 @@ def _compile_now(step, point: Mapping[str, np.ndarray]) -> None:
             method.delta_logp(q, q)
 
 
+def posterior_sha256(idata) -> str:
+    """SHA-256 over the posterior draws: variable names, dtypes, shapes and bytes."""
+    digest = hashlib.sha256()
+    posterior = idata["posterior"].to_dataset() if "posterior" in idata.children else idata
+    for name in sorted(posterior.data_vars):
+        values = np.ascontiguousarray(posterior[name].values)
+        digest.update(f"{name}|{values.dtype.str}|{values.shape}|".encode())
+        digest.update(values.tobytes())
+    return digest.hexdigest()
+
+
 def save_posterior(idata, path: str | os.PathLike, metadata: Mapping | None = None) -> Path:
-    """Write a DataTree to netCDF atomically, with its provenance in the attributes."""
+    """Write a DataTree to netCDF atomically, with its provenance in the attributes.
+
+    The attributes carry the hash of the posterior draws and the versions that
+    produced them; :func:`load_posterior` checks the hash.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
     idata.attrs["pm_joint_metadata"] = json.dumps(dict(metadata or {}), default=str)
-    idata.to_netcdf(tmp)
-    os.replace(tmp, path)
+    idata.attrs["pm_joint_versions"] = json.dumps(
+        versions("pm-joint", "pymc", "pytensor", "arviz", "numpy", "scipy")
+    )
+    idata.attrs["pm_joint_posterior_sha256"] = posterior_sha256(idata)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        idata.to_netcdf(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
     return path
 
 
@@ -389,7 +417,11 @@ def load_posterior(path: str | os.PathLike):
         raise FileNotFoundError(f"{path}: no such posterior file or trace folder")
     if path.is_dir():
         return _read_zarr_trace(path)
-    return xr.open_datatree(path).load()
+    idata = xr.open_datatree(path).load()
+    expected = idata.attrs.get("pm_joint_posterior_sha256")
+    if expected is not None:
+        check_sha256(expected, posterior_sha256(idata), str(path), "the posterior draws")
+    return idata
 
 
 def _read_zarr_trace(path: Path):

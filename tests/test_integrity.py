@@ -175,3 +175,22 @@ def test_no_file_is_unpickled_by_the_package():
                     if re.search(pattern, line) and not (safe and re.search(safe, line)):
                         found.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()}")
     assert not found, "unsafe deserialisation:\n" + "\n".join(found)
+
+
+def test_posterior_file_carries_a_hash_and_versions_checked_on_load(tmp_path):
+    from arviz_base import from_dict
+
+    from pm_joint.updating import load_posterior, save_posterior
+
+    rng = np.random.default_rng(0)
+    idata = from_dict({"posterior": {"k": rng.normal(size=(2, 50)), "c": rng.normal(size=(2, 50))}})
+    path = save_posterior(idata, tmp_path / "posterior.nc", metadata={"sampler": "test"})
+    loaded = load_posterior(path)
+    np.testing.assert_array_equal(loaded.posterior["k"].values, idata.posterior["k"].values)
+    assert "pymc" in json.loads(loaded.attrs["pm_joint_versions"])
+
+    tampered = loaded.copy(deep=True)
+    tampered["posterior"]["k"] = tampered["posterior"]["k"] + 1.0
+    tampered.to_netcdf(tmp_path / "tampered.nc")  # keeps the recorded hash
+    with pytest.raises(ValueError, match=r"tampered\.nc: hash mismatch"):
+        load_posterior(tmp_path / "tampered.nc")
