@@ -23,7 +23,12 @@ import numpy as np
 import onnx
 import torch
 
-from identification.artifacts import atomic_write_bytes, atomic_write_text, sha256_bytes
+from identification.artifacts import (
+    atomic_write_bytes,
+    atomic_write_text,
+    sha256_bytes,
+    sha256_json,
+)
 from surrogates.runtime import FORMAT, FORMAT_VERSION, MODEL_FILE, SIDECAR_FILE, SurrogateRuntime
 from surrogates.train import Surrogate
 
@@ -80,6 +85,9 @@ def export_surrogate(
         o.version for o in onnx.load_from_string(graph).opset_import if o.domain in ("", "ai.onnx")
     )
     sidecar = _sidecar(surrogate, graph, opset_used)
+    # The graph hash covers the network; this one covers the sidecar's own fields
+    # (box, levels, scalers), so that widening the box in the JSON is noticed.
+    sidecar["content_sha256"] = sha256_json(sidecar)
     atomic_write_bytes(folder / MODEL_FILE, graph)
     atomic_write_text(folder / SIDECAR_FILE, json.dumps(sidecar, indent=2) + "\n")
     _check_round_trip(surrogate, SurrogateRuntime.load(folder), check_tolerance)

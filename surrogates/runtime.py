@@ -27,7 +27,7 @@ from typing import Any, Literal
 import numpy as np
 import onnxruntime
 
-from identification.artifacts import sha256_bytes
+from identification.artifacts import check_sha256, sha256_bytes, sha256_json
 
 __all__ = [
     "CHANNEL_UNITS",
@@ -262,6 +262,14 @@ class SurrogateRuntime:
                 f"{source}: format version {version} is newer "
                 f"than this pm-joint reads ({FORMAT_VERSION})"
             )
+        recorded = metadata.get("content_sha256")
+        if recorded is not None:
+            content = {k: v for k, v in metadata.items() if k != "content_sha256"}
+            try:
+                actual = sha256_json(content)
+            except ValueError:  # NaN has no canonical form: not the content that was hashed
+                actual = "(content with NaN or infinity)"
+            check_sha256(recorded, actual, source, "the sidecar's content")
         graph_entry = metadata.get("onnx", {})
         if not isinstance(graph_entry, Mapping):
             raise ValueError(f"{source}: sidecar entry 'onnx' must be an object")

@@ -261,6 +261,7 @@ def test_tampered_graph_is_refused(exported, tmp_path):
 def test_sidecar_that_does_not_match_the_graph_is_refused(exported, tmp_path, edit):
     folder = Path(shutil.copytree(exported, tmp_path / "edited"))
     sidecar = json.loads((folder / "surrogate.json").read_text())
+    del sidecar["content_sha256"]  # as an older or hand-written sidecar: the graph check decides
     if edit == "parameters":
         sidecar["parameter_names"] = sidecar["parameter_names"][:3]
         sidecar["bounds"] = sidecar["bounds"][:3]
@@ -353,3 +354,13 @@ def test_table5_study_rows_carry_the_papers_figures():
     assert all(r["mse_amplitude_mm2"] > 0 and np.isfinite(r["pearson"]) for r in rows)
     with pytest.raises(ValueError, match="only 200 training curves"):
         table5_study(x, y, spec, sizes=(201,), n_test=30, config=config)
+
+
+def test_a_widened_box_in_the_sidecar_is_a_hash_mismatch(tmp_path, trained):
+    folder = export_surrogate(trained, tmp_path / "surrogate")
+    sidecar_path = folder / "surrogate.json"
+    sidecar = json.loads(sidecar_path.read_text())
+    sidecar["bounds"][0][1] *= 2.0  # a wider training box than the network knows
+    sidecar_path.write_text(json.dumps(sidecar))
+    with pytest.raises(ValueError, match="hash mismatch: the sidecar's content"):
+        SurrogateRuntime.load(folder)
