@@ -75,21 +75,6 @@ class _Stages:
         return result
 
 
-def _criticize(model, measured, records, idata, out, rounds: int = 2):
-    """Criticism of the updated model; the best proposed effect is added ``rounds`` times."""
-    from identification.records import Campaign
-    from pm_joint.criticism import criticize
-
-    crit = criticize(model, measured, records=list(Campaign(records)), posterior=idata)
-    for _ in range(rounds):
-        proposals = crit.missing()
-        if not proposals:
-            break
-        crit = crit.add(proposals[0].effect)
-    crit.write(out)
-    return crit
-
-
 def run_demo(out: str | Path = "demo_out", size: str = "full") -> Path:
     """Run the whole chain; returns the path of ``index.html``."""
     if size not in SIZES:
@@ -185,8 +170,8 @@ def run_demo(out: str | Path = "demo_out", size: str = "full") -> Path:
     stages.sections += pipeline.posterior_sections(out / "posterior", out)
 
     crit = stages.run(
-        "model criticism", _criticize, model, measured, records, idata, out / "criticism",
-        rounds=cfg.criticism_rounds,
+        "model criticism", pipeline.criticize_campaign, records, model, out / "criticism",
+        rounds=cfg.criticism_rounds, measured=measured, posterior=idata,
     )  # fmt: skip
     stages.sections.append(pipeline.criticism_section(out / "criticism", out))
     print(crit.summary())

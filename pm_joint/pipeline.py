@@ -170,11 +170,16 @@ def criticize_campaign(
     *,
     rounds: int = 0,
     use_records: bool = True,
+    measured: BackboneSet | None = None,
+    posterior=None,
 ):
     """Criticize a model against a campaign; optionally add the best effect ``rounds`` times.
 
-    Writes ``criticism.json`` and figures to ``out`` (for the last round, whose
-    history holds every step) and returns the last :class:`Criticism`.
+    ``measured`` are the campaign's backbones when already extracted;
+    ``posterior`` (a DataTree) gives the predictive bands and the medians the
+    model is compared at. Writes ``criticism.json`` and figures to ``out`` (for
+    the last round, whose history holds every step) and returns the last
+    :class:`~pm_joint.criticism.Criticism`.
     """
     from pm_joint.criticism import criticize
 
@@ -182,8 +187,9 @@ def criticize_campaign(
         model = JointModel.from_json(model)
     campaign = Campaign(folder)
     records = list(campaign) if use_records else None
-    measured = extract_backbones(campaign) if records is None else None
-    crit = criticize(model, measured, records=records)
+    if measured is None and records is None:
+        measured = extract_backbones(campaign)
+    crit = criticize(model, measured, records=records, posterior=posterior)
     for _ in range(rounds):
         proposals = crit.missing()
         if not proposals:
