@@ -30,19 +30,11 @@ from pathlib import Path
 from identification.backbone import extract_backbones
 from identification.fit import fit_backbones
 from identification.records import Campaign
-from identification.rig import RIG_PRESETS, Rig
+from identification.rig import HIDDEN_EFFECT_SCENARIOS, RIG_PRESETS, Rig
 from pm_joint.criticism import KEY_CHANNEL, criticize, hidden_effect_study
 
 TARGET_S = 60.0
-SCENARIOS = (
-    "hidden-none",
-    "hidden-cubic",
-    "hidden-microslip",
-    "hidden-quadratic",
-    "hidden-quadratic-damping",
-    "hidden-coulomb",
-    "hidden-two",
-)
+SCENARIOS = HIDDEN_EFFECT_SCENARIOS
 
 
 def bench(records: int, levels: int, hold_s: float) -> dict:

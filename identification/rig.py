@@ -62,6 +62,7 @@ from identification.records import (
 
 __all__ = [
     "GROUND_TRUTH_FILE",
+    "HIDDEN_EFFECT_SCENARIOS",
     "RIG_PRESETS",
     "RecordTruth",
     "Rig",
@@ -588,3 +589,6 @@ RIG_PRESETS: dict[str, RigPreset] = {
         "then cubic hardening to 110 Hz, over a linear-viscous base model",
     ),
 }  # fmt: skip
+
+#: The hidden-effect scenarios (and the control, ``hidden-none``) of the criticism studies.
+HIDDEN_EFFECT_SCENARIOS: tuple[str, ...] = tuple(n for n in RIG_PRESETS if n.startswith("hidden-"))

@@ -11,6 +11,7 @@ import xarray as xr
 from identification.backbone import Backbone, BackboneSet
 from identification.harmonic import backbone as harmonic_backbone
 from identification.model import JointModel
+from identification.rig import HIDDEN_EFFECT_SCENARIOS
 from pm_joint.criticism import (
     KEY_CHANNEL,
     criticize,
@@ -22,15 +23,7 @@ W0 = 2 * np.pi * 101.0
 K0 = W0**2
 C0 = 2 * 0.003 * W0
 AMPS = 1e-3 * np.geomspace(0.05, 2.0, 10)
-SCENARIOS = (
-    "hidden-none",
-    "hidden-cubic",
-    "hidden-microslip",
-    "hidden-quadratic",
-    "hidden-quadratic-damping",
-    "hidden-coulomb",
-    "hidden-two",
-)
+SCENARIOS = HIDDEN_EFFECT_SCENARIOS
 
 
 def linear(**extra) -> JointModel:
