@@ -482,8 +482,9 @@ _vectorize_node.register(_Dawson)(_vectorize_natively)
 #: Dawson's integral as a differentiable pytensor operation.
 dawson = _Dawson()
 
-#: Trapezoidal quadrature points of the tanh describing function, as in
-#: :func:`identification.effects.describing_by_quadrature`.
+#: Trapezoidal quadrature points of the tanh describing function (numpy tabulates
+#: the same gain once; a graph keeps the sum, which is differentiable). The error
+#: falls like exp(−400 x_s/a): below 1e-8 for amplitudes up to 20 x_s.
 _QUADRATURE_POINTS = 256
 
 

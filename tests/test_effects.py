@@ -151,3 +151,20 @@ def test_shape_parameter_validation_names_the_parameter():
         CATALOGUE["tanh_saturation"].shape_values(x_s=-1.0)
     with pytest.raises(ValueError, match=r"no shape parameter.*'width'"):
         CATALOGUE["microslip"].shape_values(width=1.0)
+
+
+@pytest.mark.parametrize("ratio", [1e-4, 2e-3, 0.7, 40.0, 900.0, 5e3])
+def test_tanh_describing_function_across_its_table_and_limits(ratio):
+    # tanh's gain is tabulated once with a series below and an asymptote above:
+    # each range against adaptive quadrature split at and around the zero
+    # crossings, where tanh(u cos θ) turns within ~1/u of θ = π/2, 3π/2.
+    x_s, omega = 1e-3, 650.0
+    a = ratio * x_s
+    k_eq, c_eq = CATALOGUE["tanh_saturation"].describing(a, omega, x_s=x_s)
+    width = min(10.0 / ratio, 0.5)
+    crossings = [c + d for c in (np.pi / 2, 3 * np.pi / 2) for d in (-width, 0.0, width)]
+    k_ref, _ = _quad_describing(
+        CATALOGUE["tanh_saturation"].force.py_func, a, omega, x_s, 0.0, crossings
+    )
+    assert k_eq == pytest.approx(k_ref, rel=1e-10)
+    assert c_eq == 0.0
