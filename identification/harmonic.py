@@ -38,7 +38,9 @@ built from one template model plus override columns (no model per set).
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numba
@@ -449,7 +451,7 @@ def _jenkins_loop(x, c_ms, k_t, f_s, force, anchor):
 # threading layers are neither fork-safe (OpenMP) nor re-entrant (workqueue), which
 # PyMC chains and dask thread workers would hit. Reassociation lets the projections
 # vectorise without giving up NaN semantics.
-@numba.njit(cache=True, fastmath={"reassoc", "contract"})
+@numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
 def _multi_harmonic_kernel(
     amplitude, omega_start, set_index, indices, coefficients, shapes, microslip,
     orders, projection, projection_sin1, basis_x, basis_v, cos1, sin1, tol, max_iter,
@@ -567,35 +569,59 @@ def _multi_harmonic(
     tol: float,
     max_iter: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Solved unknowns ``(n_sets, n_amp, 2H)``, base acceleration and convergence."""
+    """Solved unknowns ``(n_sets, n_amp, 2H)``, base acceleration and convergence.
+
+    The cases are independent: they are split over ``numba.get_num_threads()``
+    Python threads (the kernel releases the GIL). Threads rather than numba's
+    ``prange``, whose OpenMP pool breaks in processes forked after first use
+    (the samplers' chains, process pools).
+    """
     shape = omega_start.shape
     tables = _aft_tables(harmonics, n_time)
     n_unknowns = 2 * harmonics
-    y = np.empty((omega_start.size, n_unknowns))
-    base = np.empty(omega_start.size)
-    converged = np.empty(omega_start.size, dtype=np.bool_)
-    _multi_harmonic_kernel(
-        np.broadcast_to(a, shape).ravel().astype(float),
-        omega_start.ravel(),
-        np.repeat(np.arange(table.n_sets), shape[1]),
-        table.indices,
-        np.ascontiguousarray(table.coefficients),
-        np.ascontiguousarray(table.shapes),
-        np.ascontiguousarray(table.microslip),
-        tables["orders"],
-        tables["projection"],
-        tables["projection_sin1"],
-        tables["basis_x"],
-        tables["basis_v"],
-        tables["cos1"],
-        tables["sin1"],
-        float(tol),
-        int(max_iter),
-        y,
-        base,
-        converged,
-    )
+    n_cases = omega_start.size
+    y = np.empty((n_cases, n_unknowns))
+    base = np.empty(n_cases)
+    converged = np.empty(n_cases, dtype=np.bool_)
+    amplitude = np.broadcast_to(a, shape).ravel().astype(float)
+    omega_start = omega_start.ravel()
+    set_index = np.repeat(np.arange(table.n_sets), shape[1])
+    shared = (
+        table.indices, np.ascontiguousarray(table.coefficients),
+        np.ascontiguousarray(table.shapes), np.ascontiguousarray(table.microslip),
+        tables["orders"], tables["projection"], tables["projection_sin1"], tables["basis_x"],
+        tables["basis_v"], tables["cos1"], tables["sin1"], float(tol), int(max_iter),
+    )  # fmt: skip
+
+    def solve(part: slice) -> None:
+        _multi_harmonic_kernel(
+            amplitude[part], omega_start[part], set_index[part], *shared,
+            y[part], base[part], converged[part],
+        )  # fmt: skip
+
+    n_threads = min(numba.get_num_threads(), n_cases // _CASES_PER_THREAD)
+    if n_threads < 2:
+        solve(slice(None))
+    else:  # interleaved: neighbouring amplitudes cost alike
+        list(
+            _thread_pool(n_threads).map(
+                solve, [slice(i, None, n_threads) for i in range(n_threads)]
+            )
+        )
     return y.reshape(*shape, n_unknowns), base.reshape(shape), converged.reshape(shape)
+
+
+#: Fewest harmonic-balance cases worth a thread of their own (each takes ~30 µs).
+_CASES_PER_THREAD = 32
+_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
+
+
+def _thread_pool(n_threads: int) -> ThreadPoolExecutor:
+    """A pool of ``n_threads`` kept per process (a forked child gets a new one)."""
+    key = (os.getpid(), n_threads)
+    if key not in _POOLS:
+        _POOLS[key] = ThreadPoolExecutor(n_threads, thread_name_prefix="harmonic")
+    return _POOLS[key]
 
 
 # --------------------------------------------------------------------------
