@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from identification.artifacts import atomic_write_text
+from identification.artifacts import atomic_write_text, versions
 from identification.model import JointModel
 from identification.records import (
     CENTRE_POINT,
@@ -399,10 +399,15 @@ class Rig:
         when ``runs > 1``). Assembly ``a`` draws its model from
         ``default_rng([seed, a])``, run ``r`` its noise from
         ``default_rng([seed, a, r])``. With an ``executor``
-        (``concurrent.futures``-style, e.g. a dask Client) the simulations run there.
-        Velocities are written with ``precision`` digits after the point, far
-        below the sensor noise; at 6 a sample takes about 280 bytes (10 levels
-        of 2.6 s at 10 kHz: about 75 MB per record).
+        (``concurrent.futures``-style, e.g. a process pool or a dask Client) each
+        record is simulated and written there; formatting the text takes as long
+        as the simulation. Velocities are written with ``precision`` digits after
+        the point, far below the sensor noise; at 6 a sample takes about 280 bytes
+        (10 levels of 2.6 s at 10 kHz: about 75 MB per record).
+
+        ``ground_truth.json`` is rewritten (atomically) after every record, so
+        whatever is on disk when a run stops has its truth beside it; the first
+        failure is raised after the records that did finish are accounted for.
         """
         if assemblies < 1 or runs < 1:
             raise ValueError(f"assemblies and runs must be ≥ 1, got {assemblies}, {runs}")
@@ -413,32 +418,38 @@ class Rig:
             for r in range(1, runs + 1):
                 name = record_name(self.config, a, r if runs > 1 else None)
                 jobs.append((name, model, gain, (seed, a, r)))
-        if executor is None:  # one record in memory at a time
-            records = (_simulate_job(self, *job) for job in jobs)
+        formatting = {"comma": comma, "extension": extension, "precision": precision}
+        if executor is None:  # one record in memory at a time, stop at the first failure
+            outcomes = (_write_job(self, folder, formatting, *job) for job in jobs)
         else:
-            futures = [executor.submit(_simulate_job, self, *job) for job in jobs]
-            records = (future.result() for future in futures)
+            futures = [executor.submit(_write_job, self, folder, formatting, *job) for job in jobs]
+            outcomes = (_outcome(future) for future in futures)
         if progress:
             from tqdm.auto import tqdm
 
-            records = tqdm(records, total=len(jobs), desc="rig records", unit="record")
-        truth = {}
-        for job, record in zip(jobs, records, strict=True):
-            write_record(record, folder, comma=comma, extension=extension, precision=precision)
-            name, model, gain, seeds = job
+            outcomes = tqdm(outcomes, total=len(jobs), desc="rig records", unit="record")
+        truth, failure = {}, None
+        sidecar = self._sidecar(truth)  # holds ``truth`` itself, which fills below
+        for (name, model, gain, seeds), outcome in zip(jobs, outcomes, strict=True):
+            if isinstance(outcome, Exception):
+                failure = failure or outcome
+                continue
             truth[name] = {
                 "model": model.to_dict(),
                 "shaker_gain": gain,
                 "noise_m_s": self.noise_m_s,
                 "seed": list(seeds),
             }
-        atomic_write_text(folder / GROUND_TRUTH_FILE, json.dumps(self._sidecar(truth), indent=2))
+            atomic_write_text(folder / GROUND_TRUTH_FILE, json.dumps(sidecar, indent=2))
+        if failure is not None:
+            raise failure
         return Campaign(folder)
 
     def _sidecar(self, records: dict[str, Any]) -> dict[str, Any]:
         return {
             "format": _FORMAT,
             "version": 1,
+            "versions": versions(),
             "rig": {
                 "name": self.name,
                 "description": self.description,
@@ -458,9 +469,20 @@ class Rig:
         }
 
 
-def _simulate_job(rig: Rig, name: str, model: JointModel, gain: float, seeds) -> Record:
-    """One record (module level so that executors can pickle it)."""
-    return rig.simulate(model, gain, np.random.default_rng(list(seeds)), name)
+def _write_job(
+    rig: Rig, folder: Path, formatting: dict, name: str, model: JointModel, gain: float, seeds
+) -> Path:
+    """Simulate and write one record (module level so that executors can pickle it)."""
+    record = rig.simulate(model, gain, np.random.default_rng(list(seeds)), name)
+    return write_record(record, folder, **formatting)
+
+
+def _outcome(future) -> Any:
+    """A future's result, or the exception it raised (so later records still count)."""
+    try:
+        return future.result()
+    except Exception as exc:  # re-raised by write_campaign after its bookkeeping
+        return exc
 
 
 def read_ground_truth(folder: str | Path) -> dict[str, RecordTruth]:

@@ -47,7 +47,7 @@ def _cmd_rig(args: argparse.Namespace) -> None:
 
     campaign = write_rig_campaign(
         args.preset, args.out, assemblies=args.assemblies, runs=args.runs, seed=args.seed,
-        levels=args.levels,
+        levels=args.levels, workers=args.workers,
     )  # fmt: skip
     print(f"wrote {len(campaign)} record(s) of rig preset {args.preset!r} to {args.out}")
 
@@ -147,6 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--runs", type=int, default=1, help="runs per assembly (default 1)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--levels", type=int, default=10, help="excitation levels (default 10)")
+    p.add_argument("--workers", type=int, help="processes writing records (default: one per CPU)")
     p.set_defaults(func=_cmd_rig)
 
     p = sub.add_parser("backbones", help="extract backbones from every record of a campaign")

@@ -8,8 +8,10 @@ subcommands and the demo call these and nothing else.
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import matplotlib
@@ -47,13 +49,26 @@ def write_rig_campaign(
     runs: int = 1,
     seed: int = 0,
     levels: int = 10,
+    workers: int | None = None,
     progress: bool = True,
 ) -> Campaign:
-    """Write a virtual campaign of the rig preset ``preset`` in the TRC layout."""
+    """Write a virtual campaign of the rig preset ``preset`` in the TRC layout.
+
+    Records are simulated and written by ``workers`` processes (default: one
+    per CPU); the files do not depend on it.
+    """
     if preset not in RIG_PRESETS:
         raise ValueError(f"unknown rig preset {preset!r}; available: {', '.join(RIG_PRESETS)}")
     rig = Rig.preset(preset, levels=levels)
-    return rig.write_campaign(out, assemblies=assemblies, runs=runs, seed=seed, progress=progress)
+    workers = min(workers or os.cpu_count() or 1, assemblies * runs)
+    options = {"assemblies": assemblies, "runs": runs, "seed": seed, "progress": progress}
+    if workers < 2:
+        return rig.write_campaign(out, **options)
+    # forkserver: workers start from a clean process, not a fork of this
+    # (possibly multi-threaded) one.
+    context = multiprocessing.get_context("forkserver")
+    with ProcessPoolExecutor(workers, mp_context=context) as executor:
+        return rig.write_campaign(out, executor=executor, **options)
 
 
 def campaign_backbones(

@@ -175,3 +175,25 @@ def test_rig_round_trip_recovers_the_ground_truth(tmp_path):
         np.testing.assert_allclose(curve.damping_ratio, expected.damping_ratio, rtol=0.10)
         assert np.abs(curve.phase_error_deg).max() < 5
     assert truth["Config1_PRT_Assemb1"].model != truth["Config1_PRT_Assemb2"].model
+
+
+@pytest.mark.parametrize("pool", [False, True], ids=["in process", "executor"])
+def test_a_failing_record_leaves_the_finished_ones_with_their_truth(tmp_path, monkeypatch, pool):
+    rig = _small_rig(variability={"linear_stiffness": 0.02})
+    simulate = Rig.simulate
+
+    def fail_on_the_second(self, model, gain, rng, name):
+        if name.endswith("Assemb2"):
+            raise RuntimeError(f"{name}: diverged")
+        return simulate(self, model, gain, rng, name)
+
+    monkeypatch.setattr(Rig, "simulate", fail_on_the_second)
+    executor = ThreadPoolExecutor(2) if pool else None
+    with pytest.raises(RuntimeError, match="Assemb2: diverged"):
+        rig.write_campaign(tmp_path, assemblies=3, seed=1, executor=executor)
+    # in process the run stops at the failure; an executor finishes the others
+    written = ["Config1_PRT_Assemb1"] + (["Config1_PRT_Assemb3"] if pool else [])
+    assert Campaign(tmp_path).names == written
+    assert sorted(read_ground_truth(tmp_path)) == written
+    sidecar = json.loads((tmp_path / GROUND_TRUTH_FILE).read_text())
+    assert sidecar["versions"]["numpy"] == np.__version__
