@@ -33,10 +33,12 @@ class DemoSize:
     criticism_rounds: int
 
 
+#: ``full`` is the paper's: 25 measured backbones, 500 training curves, 30 000
+#: Metropolis samples (two chains of 15 000 on the two cores).
 SIZES = {
     "full": DemoSize(
         assemblies=25, levels=10, sindy_records=3, surrogate_curves=500, surrogate_epochs=None,
-        draws=30_000, tune=2_000, chains=2, criticism_rounds=2,
+        draws=15_000, tune=2_000, chains=2, criticism_rounds=2,
     ),
     "small": DemoSize(
         assemblies=4, levels=10, sindy_records=3, surrogate_curves=60, surrogate_epochs=15,
