@@ -47,6 +47,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
+from identification.checks import positive_vector
 from identification.effects import CATALOGUE, jenkins_force, memoryless_force
 from identification.model import JointModel
 
@@ -672,7 +673,7 @@ def backbone(
         NaN and ``converged = False`` where there is no phase-resonant solution
         (e.g. no positive stiffness) or the solver did not converge.
     """
-    a = _validated_amplitudes(amplitudes_m)
+    a = positive_vector(amplitudes_m, "amplitudes_m")
     if method not in ("single", "multi"):
         raise ValueError(f"method must be 'single' or 'multi', got {method!r}")
     table = coefficient_table(model, parameters, names)
@@ -714,18 +715,3 @@ def backbone(
         harmonics_cos_m=None if cos_m is None else squeeze(cos_m),
         harmonics_sin_m=None if sin_m is None else squeeze(sin_m),
     )
-
-
-def _validated_amplitudes(amplitudes_m: ArrayLike) -> np.ndarray:
-    try:
-        a = np.atleast_1d(np.asarray(amplitudes_m, dtype=float))
-    except (TypeError, ValueError):
-        raise ValueError(f"amplitudes_m must be numbers, got {amplitudes_m!r}") from None
-    if a.ndim != 1 or a.size == 0:
-        raise ValueError(f"amplitudes_m must be a non-empty 1-D array, got shape {a.shape}")
-    bad = np.flatnonzero(~np.isfinite(a) | (a <= 0))
-    if bad.size:
-        raise ValueError(
-            f"amplitudes_m must be finite and > 0; amplitudes_m[{bad[0]}] = {a[bad[0]]}"
-        )
-    return a

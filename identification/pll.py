@@ -85,6 +85,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from tqdm.auto import tqdm
 
+from identification.checks import positive_vector
 from identification.effects import CATALOGUE, jenkins_force, memoryless_force
 from identification.harmonic import CoefficientTable, coefficient_table
 from identification.model import JointModel
@@ -825,19 +826,6 @@ def _backbones_parallel(indices, coefficients, shapes, microslip, control, setti
 # Python side: inputs, per-set arrays, results.
 
 
-def _validated_levels(levels: ArrayLike) -> np.ndarray:
-    array = np.ascontiguousarray(levels, dtype=float)
-    if array.ndim != 1 or array.size == 0:
-        raise ValueError(f"levels must be a non-empty 1-D array, got shape {array.shape}")
-    bad = np.flatnonzero(~np.isfinite(array) | (array <= 0))
-    if bad.size:
-        raise ValueError(
-            f"levels (base-acceleration amplitudes, m/s²) must be finite and > 0; "
-            f"level {bad[0]} is {array[bad[0]]}"
-        )
-    return array
-
-
 def _settings(config: PLLConfig) -> np.ndarray:
     settings = np.zeros(_N_SETTINGS)
     excitation = _FORCE_VS_EXCITATION_DEG
@@ -954,7 +942,7 @@ def simulate_pll(
         One backbone point per level, arrays of shape ``(n_levels,)``.
     """
     config = PLLConfig() if config is None else config
-    levels = _validated_levels(levels)
+    levels = positive_vector(levels, "levels")
     table = coefficient_table(model)
     control = _control(table, config, model)
     _check_timing(config, control)
@@ -1069,7 +1057,7 @@ def pll_backbones(
         :func:`simulate_pll` on each set.
     """
     config = PLLConfig() if config is None else config
-    levels = _validated_levels(levels)
+    levels = positive_vector(levels, "levels")
     names = list(names)
     values = np.asarray(parameters, dtype=float)
     # Validates names and values and the stability of every set before any work is sent out.

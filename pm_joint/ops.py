@@ -46,10 +46,10 @@ from pytensor.graph.op import Op
 from pytensor.graph.replace import _vectorize_node
 from scipy import special
 
+from identification.checks import positive_vector
 from identification.effects import CATALOGUE
-from identification.harmonic import _validated_amplitudes
 from identification.model import JointModel
-from identification.pll import PLLConfig, _validated_levels, pll_backbones
+from identification.pll import PLLConfig, pll_backbones
 from surrogates.runtime import SurrogateRuntime
 
 __all__ = [
@@ -258,7 +258,7 @@ class PLLOp(_BackboneOp):
         super().__init__()
         self.model = model
         self.parameter_names = _checked_names(model, names)
-        self.levels = _validated_levels(levels)
+        self.levels = positive_vector(levels, "levels")
         self.n_points = self.levels.size
         self.config = PLLConfig() if config is None else config
         self.executor = executor
@@ -623,7 +623,7 @@ def harmonic_backbone_graph(
         parameters are not > 0.
     """
     names = _checked_names(model, names)
-    amplitudes = _validated_amplitudes(amplitudes_m)
+    amplitudes = positive_vector(amplitudes_m, "amplitudes_m")
     theta = pt.as_tensor_variable(theta).astype("float64")
     if theta.ndim == 0 or theta.type.shape[-1] not in (None, len(names)):
         raise ValueError(
@@ -698,7 +698,7 @@ class HarmonicBalanceOp:
     ) -> None:
         self.model = model
         self.parameter_names = _checked_names(model, names)
-        self.amplitudes_m = _validated_amplitudes(amplitudes_m)
+        self.amplitudes_m = positive_vector(amplitudes_m, "amplitudes_m")
         self.n_points = self.amplitudes_m.size
 
     def __call__(self, theta: Any) -> pt.TensorVariable:
