@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from identification.effects import CATALOGUE
 from identification.model import PRESETS, JointModel
@@ -104,6 +105,7 @@ def _cmd_update(args: argparse.Namespace) -> None:
         load_backbones(args.dir), model, args.out, forward=args.forward,
         surrogate=args.surrogate, sampler=args.sampler, draws=args.draws, tune=args.tune,
         chains=args.chains, seed=args.seed, report_dir=args.report,
+        trace=args.trace or Path(args.out).with_suffix(".zarr"), resume=args.resume,
     )  # fmt: skip
     print(f"wrote {args.out}")
 
@@ -197,6 +199,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--chains", type=int, default=2, help="chains (default 2)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--report", help="also write the arviz report into this folder")
+    p.add_argument(
+        "--trace", help="zarr folder the draws are written to as they are taken (default: "
+        "OUT with the suffix .zarr)",
+    )  # fmt: skip
+    p.add_argument(
+        "--resume", action="store_true",
+        help="continue a stopped run from its trace instead of starting again",
+    )  # fmt: skip
     p.set_defaults(func=_cmd_update)
 
     p = sub.add_parser("report", help="HTML report of a run")

@@ -228,15 +228,20 @@ def update_backbones(
     chains: int = 2,
     seed: int = 0,
     report_dir: str | os.PathLike | None = None,
+    trace: str | os.PathLike | None = None,
+    resume: bool = False,
 ):
     """Stochastic updating on measured backbones; saves the posterior (netCDF).
 
+    With ``trace`` (a zarr folder) the draws are written there as they are
+    taken; with ``resume`` a run that stopped continues from that folder
+    (:func:`pm_joint.updating.continue_sampling`) instead of starting again.
     With ``report_dir`` the arviz report (summary, pairs, correlation, trace,
     predictive backbones, PDFs at low/mid/high amplitude) is written there.
     Returns the DataTree.
     """
     from pm_joint.report import report
-    from pm_joint.updating import build_model, sample, save_posterior
+    from pm_joint.updating import build_model, continue_sampling, sample, save_posterior
 
     levels = None
     if forward == "surrogate":
@@ -244,9 +249,13 @@ def update_backbones(
     pm_model = build_model(
         model, measured, forward=forward, surrogate=surrogate, names=names, levels=levels
     )
-    idata = sample(
-        pm_model, sampler=sampler, draws=draws, tune=tune, chains=chains, random_seed=seed
-    )
+    if resume and trace is not None and Path(trace).exists():
+        idata = continue_sampling(pm_model, trace, draws=draws, sampler=sampler)
+    else:
+        idata = sample(
+            pm_model, sampler=sampler, draws=draws, tune=tune, chains=chains, random_seed=seed,
+            trace=trace,
+        )  # fmt: skip
     save_posterior(
         idata, out, metadata={"forward": forward, "sampler": sampler, "surrogate": str(surrogate)}
     )

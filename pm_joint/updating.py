@@ -57,6 +57,7 @@ __all__ = [
     "SAMPLERS",
     "Coverage",
     "build_model",
+    "continue_sampling",
     "default_bounds",
     "hierarchical_model",
     "load_posterior",
@@ -263,6 +264,7 @@ def sample(
     trace: str | os.PathLike | None = None,
     trace_chunk: int = 100,
     step_options: Mapping | None = None,
+    initvals: Sequence[Mapping] | Mapping | None = None,
 ):
     """Sample the model; returns an arviz DataTree (posterior, sample_stats, ...).
 
@@ -283,6 +285,8 @@ def sample(
         Keywords of the PyMC step method (e.g. ``target_accept`` for NUTS;
         ``blocked=False`` gives PyMC's default Metropolis, one step and one
         compiled function per variable).
+    initvals
+        Starting points (one mapping, or one per chain), as ``pm.sample`` takes them.
 
     Notes
     -----
@@ -322,6 +326,7 @@ def sample(
             step=step,
             random_seed=random_seed,
             progressbar=progressbar,
+            initvals=initvals,
             **kwargs,
         )
     if trace is not None:
@@ -329,6 +334,67 @@ def sample(
         log_warnings(run_convergence_checks(idata, pm_model))
     idata.attrs["sampler"] = sampler
     return idata
+
+
+def continue_sampling(
+    pm_model: pm.Model,
+    trace: str | os.PathLike,
+    *,
+    draws: int,
+    tune: int = 500,
+    sampler: str = "metropolis",
+    random_seed: int | None = 1,
+    progressbar: bool = True,
+    continued_trace: str | os.PathLike | None = None,
+    step_options: Mapping | None = None,
+):
+    """Continue a stopped run until every chain has ``draws`` posterior draws.
+
+    Reads the draws ``trace`` holds (:func:`load_posterior`; the run must have
+    finished tuning), restarts each chain at its last draw, tunes the step
+    there again for ``tune`` steps and samples the draws still missing into
+    ``continued_trace`` (default: ``<trace>-continued``), written as they are
+    taken, so a second stop loses no more than the first. Returns both parts
+    joined along ``draw`` (attribute ``continued_at``: the draws of the first).
+
+    Notes
+    -----
+    The step's tuned state is stored in the trace only as a pickle, which is
+    not read back (a trace may come from someone else): the step is tuned
+    again instead, starting from posterior draws, so every kept draw is still a
+    draw of the posterior. The first part's draws are not changed.
+    """
+    trace = Path(trace)
+    done = load_posterior(trace)
+    have, chains = done.posterior.sizes["draw"], done.posterior.sizes["chain"]
+    if have >= draws:
+        return done
+    names = [rv.name for rv in pm_model.free_RVs]
+    missing = [n for n in names if n not in done.posterior]
+    if missing:
+        raise ValueError(f"{trace}: the trace has no draws of {missing}: not a run of this model")
+    last = done.posterior.isel(draw=-1)
+    initvals = [{n: last[n].isel(chain=c).values for n in names} for c in range(chains)]
+    rest = sample(
+        pm_model, sampler=sampler, draws=draws - have, tune=tune, chains=chains,
+        random_seed=random_seed, progressbar=progressbar, step_options=step_options,
+        trace=continued_trace or trace.with_name(f"{trace.name}-continued"), initvals=initvals,
+    )  # fmt: skip
+    joined = {"/posterior": _joined(done.posterior, rest.posterior)}
+    joined["/sample_stats"] = _joined(done.sample_stats, rest.sample_stats)
+    for name, node in rest.children.items():
+        joined.setdefault(f"/{name}", node.to_dataset())
+    tree = xr.DataTree.from_dict(joined)
+    tree.attrs.update(rest.attrs, continued_at=have, interrupted=0)
+    return tree
+
+
+def _joined(first, second) -> xr.Dataset:
+    """Two runs' draws one after the other (variables both have), draws renumbered."""
+    first, second = first.to_dataset(), second.to_dataset()
+    common = [v for v in first.data_vars if v in second.data_vars]
+    joined = xr.concat([first[common], second[common]], dim="draw")
+    return joined.assign_coords(draw=np.arange(joined.sizes["draw"]))
 
 
 @contextlib.contextmanager

@@ -18,6 +18,7 @@ from scipy.integrate import cumulative_trapezoid
 from identification.model import JointModel
 from pm_joint.cli import main
 from pm_joint.html import missing_links
+from pm_joint.updating import load_posterior
 
 FS = 10_000.0
 ZETA = 0.005
@@ -166,6 +167,11 @@ def test_rig_campaign_through_every_stage(rig_campaign, tmp_path):
     argv += ["--surrogate", str(surrogate), "--out", str(posterior)]
     argv += ["--sampler", "demetropolisz"]
     assert main([*argv, "--draws", "400", "--tune", "400", "--chains", "1"]) == 0
+    # the draws went to posterior.zarr as they were taken; --resume carries the run on
+    assert load_posterior(posterior.with_suffix(".zarr")).posterior.sizes["draw"] == 400
+    assert main([*argv, "--draws", "600", "--chains", "1", "--resume"]) == 0
+    resumed = load_posterior(posterior).posterior["linear_stiffness"]
+    assert resumed.sizes == {"chain": 1, "draw": 600}
 
     crit = tmp_path / "criticism"
     assert main(["criticize", str(rig_campaign), "--model", str(model), "--out", str(crit)]) == 0

@@ -32,6 +32,7 @@ from pm_joint.likelihood import NanCounter, amplitude_levels, level_marks
 from pm_joint.ops import HarmonicBalanceOp, PLLOp, SurrogateOp
 from pm_joint.updating import (
     build_model,
+    continue_sampling,
     hierarchical_model,
     load_posterior,
     population_coverage,
@@ -377,6 +378,18 @@ def test_a_killed_run_leaves_its_draws(tmp_path):
     assert x.shape[:2] == (2, written - 200) and np.isfinite(x).all()
     # The draws are the standard normal's (Metropolis: about 1 effective draw in 5).
     assert abs(x.mean()) < 0.25 and 0.75 < x.std() < 1.25
+    # ... and the run goes on from there to the draws it was asked for.
+    with pm.Model() as model:
+        pm.Normal("x", 0.0, 1.0, shape=2)
+    total = x.shape[1] + 1500
+    whole = continue_sampling(model, folder, draws=total, tune=200, progressbar=False)
+    joined = whole.posterior["x"].values
+    assert joined.shape[:2] == (2, total) and whole.attrs["continued_at"] == x.shape[1]
+    np.testing.assert_array_equal(joined[:, : x.shape[1]], x)  # the first part as it was
+    rest = joined[:, x.shape[1] :]
+    assert abs(rest.mean()) < 0.25 and 0.75 < rest.std() < 1.25
+    assert load_posterior(tmp_path / "killed.zarr-continued").posterior.sizes["draw"] == 1500
+    assert continue_sampling(model, folder, draws=x.shape[1]).posterior.sizes["draw"] == x.shape[1]
 
 
 def _wait_for_draws(folder, n, child, timeout_s=120.0):
