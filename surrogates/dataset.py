@@ -40,24 +40,21 @@ import dataclasses
 import io
 import json
 import math
-import platform
 import warnings
 import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from importlib import metadata as package_metadata
 from pathlib import Path
 from typing import Any, Literal, NamedTuple
 
 import numpy as np
-import scipy
 from numpy.typing import ArrayLike
 from scipy.optimize import elementwise
 from scipy.stats import qmc
 from tqdm.auto import tqdm
 
-from identification.artifacts import atomic_write_bytes, sha256_bytes
+from identification.artifacts import atomic_write_bytes, sha256_bytes, versions
 from identification.backbone import BackboneSet
 from identification.fit import default_free, resolve_method
 from identification.harmonic import backbone
@@ -563,7 +560,7 @@ def generate_dataset(
             "measured": 0,
         },
         "measured": {"added": [], "excluded": {}},
-        "versions": _versions(),
+        "versions": versions(),
     }
     if reasons or flags.any():
         warnings.warn(
@@ -629,19 +626,6 @@ def _run_harmonic(
             outcomes += result
             bar.update(len(chunk))
     return outcomes
-
-
-def _versions() -> dict[str, str | None]:
-    try:
-        pm_joint = package_metadata.version("pm-joint")
-    except package_metadata.PackageNotFoundError:
-        pm_joint = None
-    return {
-        "pm-joint": pm_joint,
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "python": platform.python_version(),
-    }
 
 
 # ---------------------------------------------------------------------------

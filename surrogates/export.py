@@ -12,10 +12,8 @@ everything a user needs to trust and use the graph (see
 from __future__ import annotations
 
 import json
-import platform
 import sys
 from datetime import UTC, datetime
-from importlib import metadata as package_metadata
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +26,7 @@ from identification.artifacts import (
     atomic_write_text,
     sha256_bytes,
     sha256_json,
+    versions,
 )
 from surrogates.runtime import FORMAT, FORMAT_VERSION, MODEL_FILE, SIDECAR_FILE, SurrogateRuntime
 from surrogates.train import Surrogate
@@ -136,21 +135,13 @@ def _sidecar(surrogate: Surrogate, graph: bytes, opset: int) -> dict[str, Any]:
             "train_seconds": surrogate.train_seconds,
             "validation_metrics": surrogate.metrics,
         },
+        # torch's own version string names its build (e.g. +cu132); metadata's does not.
         "versions": {
-            "pm-joint": _version("pm-joint"),
+            **versions("pm-joint", "onnx"),
             "torch": torch.__version__,
-            "onnx": onnx.__version__,
-            "python": platform.python_version(),
             "platform": sys.platform,
         },
     }
-
-
-def _version(package: str) -> str | None:
-    try:
-        return package_metadata.version(package)
-    except package_metadata.PackageNotFoundError:
-        return None
 
 
 def _check_round_trip(surrogate: Surrogate, runtime: SurrogateRuntime, tolerance: float) -> None:
