@@ -77,8 +77,12 @@ class _Stages:
         return result
 
 
-def run_demo(out: str | Path = "demo_out", size: str = "full") -> Path:
-    """Run the whole chain; returns the path of ``index.html``."""
+def run_demo(out: str | Path = "demo_out", size: str = "full", workers: int | None = None) -> Path:
+    """Run the whole chain; returns the path of ``index.html``.
+
+    ``workers`` processes write the virtual campaign (None: one per CPU; see
+    :func:`pm_joint.pipeline.write_rig_campaign`).
+    """
     if size not in SIZES:
         raise ValueError(f"size must be one of {sorted(SIZES)}, got {size!r}")
     cfg = SIZES[size]
@@ -89,7 +93,7 @@ def run_demo(out: str | Path = "demo_out", size: str = "full") -> Path:
 
     stages.run(
         "virtual campaign", pipeline.write_rig_campaign, "trc-like", records,
-        assemblies=cfg.assemblies, levels=cfg.levels, seed=0,
+        assemblies=cfg.assemblies, levels=cfg.levels, seed=0, workers=workers,
     )  # fmt: skip
     measured = stages.run("backbones", pipeline.campaign_backbones, records, out / "backbones.csv")
     stages.sections.append(

@@ -49,13 +49,15 @@ def write_rig_campaign(
     runs: int = 1,
     seed: int = 0,
     levels: int = 10,
-    workers: int | None = None,
+    workers: int | None = 1,
     progress: bool = True,
 ) -> Campaign:
     """Write a virtual campaign of the rig preset ``preset`` in the TRC layout.
 
-    Records are simulated and written by ``workers`` processes (default: one
-    per CPU); the files do not depend on it.
+    Records are simulated and written by ``workers`` processes (None: one per
+    CPU); the files do not depend on it. With more than one, call this from a
+    script's ``if __name__ == "__main__":`` block: worker processes start by
+    importing the main script.
     """
     if preset not in RIG_PRESETS:
         raise ValueError(f"unknown rig preset {preset!r}; available: {', '.join(RIG_PRESETS)}")
