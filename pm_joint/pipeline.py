@@ -237,7 +237,8 @@ def update_backbones(
 
     With ``trace`` (a zarr folder) the draws are written there as they are
     taken; with ``resume`` a run that stopped continues from that folder
-    (:func:`pm_joint.updating.continue_sampling`) instead of starting again.
+    (:func:`pm_joint.updating.continue_sampling`). Without it an existing
+    folder is refused rather than overwritten.
     With ``report_dir`` the arviz report (summary, pairs, correlation, trace,
     predictive backbones, PDFs at low/mid/high amplitude) is written there.
     Returns the DataTree.
@@ -245,6 +246,10 @@ def update_backbones(
     from pm_joint.report import report
     from pm_joint.updating import build_model, continue_sampling, sample, save_posterior
 
+    if trace is not None and Path(trace).exists() and not resume:
+        raise ValueError(
+            f"{trace} holds the draws of an earlier run: resume it, or remove it to start again"
+        )
     levels = None
     if forward == "surrogate":
         levels = _levels_within_surrogate(measured, surrogate)

@@ -169,6 +169,7 @@ def test_rig_campaign_through_every_stage(rig_campaign, tmp_path):
     assert main([*argv, "--draws", "400", "--tune", "400", "--chains", "1"]) == 0
     # the draws went to posterior.zarr as they were taken; --resume carries the run on
     assert load_posterior(posterior.with_suffix(".zarr")).posterior.sizes["draw"] == 400
+    assert main([*argv, "--draws", "600", "--chains", "1"]) == 2  # never overwritten
     assert main([*argv, "--draws", "600", "--chains", "1", "--resume"]) == 0
     resumed = load_posterior(posterior).posterior["linear_stiffness"]
     assert resumed.sizes == {"chain": 1, "draw": 600}
