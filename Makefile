@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 PYTHON312 := $(shell for c in python3.12 $$HOME/.pyenv/versions/3.12*/bin/python3.12 /usr/local/bin/python3.12 /usr/bin/python3.12; do \
 	$$c -c 'import sys; assert sys.version_info[:2] == (3, 12)' >/dev/null 2>&1 && { echo $$c; break; }; done)
 
-.PHONY: demo test test-all lint format bench clean
+.PHONY: demo test test-all lint format bench clean clean-cache
 
 $(VENV)/.installed: pyproject.toml
 	@test -n "$(PYTHON312)" || { echo "error: Python 3.12 not found (tried python3.12 and ~/.pyenv/versions/3.12*)"; exit 1; }
@@ -38,5 +38,9 @@ format: $(VENV)/.installed
 bench: $(VENV)/.installed
 	for f in bench/*.py; do $(PY) $$f || exit 1; done
 
-clean:
+clean: clean-cache
 	rm -rf $(VENV) build dist *.egg-info .pytest_cache .ruff_cache
+
+# numba's cache checks only a kernel's own file, not the kernels it inlines.
+clean-cache:
+	find . -path ./$(VENV) -prune -o \( -name '*.nbi' -o -name '*.nbc' \) -type f -exec rm -f {} +
