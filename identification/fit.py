@@ -981,13 +981,22 @@ def _refine(
     # Multi-harmonic solutions are converged to ~1e-10: coarser steps than √eps.
     relative_step = 1e-6 if method == "multi" else np.sqrt(np.finfo(float).eps)
 
+    last: dict[str, np.ndarray] = {}
+
+    def residual(u: np.ndarray) -> np.ndarray:
+        last["u"], last["r"] = u.copy(), residuals(u[None])[0]
+        return last["r"]
+
     def jacobian(u: np.ndarray) -> np.ndarray:
-        """Forward differences as scipy takes them, all columns in one batched call."""
+        """Forward differences as scipy takes them, all columns in one batched call.
+
+        The residual at ``u`` is the one least squares has just evaluated there.
+        """
         step = relative_step * np.where(u >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(u))
         step = np.where(u + step > upper, -step, step)  # one-sided the other way at a bound
         step = (u + step) - u
-        r = residuals(np.vstack([u, u + np.diag(step)]))
-        return ((r[1:] - r[0]) / step[:, None]).T
+        at_u = last["r"] if np.array_equal(last.get("u"), u) else residuals(u[None])[0]
+        return ((residuals(u + np.diag(step)) - at_u) / step[:, None]).T
 
     costs: list[float] = []
 
@@ -1004,7 +1013,7 @@ def _refine(
     # harmonic-balance threads need.
     with threadpool_limits(1, user_api="blas"):
         solution = least_squares(
-            lambda u: residuals(u[None])[0],
+            residual,
             np.zeros(len(free)),
             jac=jacobian,
             bounds=(lower, upper),
