@@ -246,7 +246,8 @@ def update_backbones(
     from pm_joint.report import report
     from pm_joint.updating import build_model, continue_sampling, sample, save_posterior
 
-    if trace is not None and Path(trace).exists() and not resume:
+    earlier_run = trace is not None and Path(trace).exists()
+    if earlier_run and not resume:
         raise ValueError(
             f"{trace} holds the draws of an earlier run: resume it, or remove it to start again"
         )
@@ -256,7 +257,7 @@ def update_backbones(
     pm_model = build_model(
         model, measured, forward=forward, surrogate=surrogate, names=names, levels=levels
     )
-    if resume and trace is not None and Path(trace).exists():
+    if earlier_run:  # and resume
         idata = continue_sampling(pm_model, trace, draws=draws, sampler=sampler)
     else:
         idata = sample(
