@@ -27,11 +27,11 @@ import tempfile
 import time
 from pathlib import Path
 
-from identification.backbone import extract_backbones
-from identification.fit import fit_backbones
-from identification.records import Campaign
+from identification.criticism.criticism import KEY_CHANNEL, criticize, hidden_effect_study
+from identification.fitting.fit import fit_backbones
+from identification.measurements.backbone import extract_backbones
+from identification.measurements.records import Campaign
 from identification.rig import HIDDEN_EFFECT_SCENARIOS, RIG_PRESETS, Rig
-from pm_joint.criticism import KEY_CHANNEL, criticize, hidden_effect_study
 
 TARGET_S = 60.0
 SCENARIOS = HIDDEN_EFFECT_SCENARIOS

@@ -18,7 +18,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from identification.harmonic import backbone, default_time_samples  # noqa: E402
+from identification.analytical.harmonic import backbone, default_time_samples  # noqa: E402
 from identification.model import JointModel  # noqa: E402
 
 N_SETS = 1000

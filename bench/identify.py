@@ -27,10 +27,10 @@ import warnings
 
 import numpy as np
 
-from identification import harmonic
+from identification.analytical import harmonic
 from identification.effects import CATALOGUE
+from identification.measurements.records import record_name
 from identification.model import JointModel
-from identification.records import record_name
 from identification.rig import Rig
 from identification.sindy import (
     PAPER_LIBRARY,

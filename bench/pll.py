@@ -29,9 +29,9 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from identification.harmonic import backbone  # noqa: E402
+from identification.analytical.harmonic import backbone  # noqa: E402
+from identification.analytical.pll import pll_backbones, simulate_pll  # noqa: E402
 from identification.model import JointModel  # noqa: E402
-from identification.pll import pll_backbones, simulate_pll  # noqa: E402
 
 N_LEVELS = 41
 N_SETS = 500

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from identification.records import StepSchedule
+from identification.measurements.records import StepSchedule
 
 THROUGHPUT_TARGET_MB_S = 100.0
 PEAK_TARGET_OVER_ARRAY = 3.0
@@ -43,7 +43,7 @@ CHILD = r"""
 import json, os, resource, sys, time
 path, how = sys.argv[1], sys.argv[2]
 import numpy as np, pandas as pd
-from identification.records import read_record
+from identification.measurements.records import read_record
 
 def status(key):
     with open("/proc/self/status") as fh:

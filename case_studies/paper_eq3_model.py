@@ -33,7 +33,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from identification import harmonic, pll
+from identification.analytical import harmonic, pll
 from identification.model import JointModel
 
 SMALL = os.environ.get("PM_JOINT_SIZE") == "small"

@@ -33,8 +33,8 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-from identification.fit import default_free
-from identification.records import Campaign
+from identification.fitting.fit import default_free
+from identification.measurements.records import Campaign
 from identification.sindy import PAPER_LIBRARY
 from pm_joint import pipeline
 

@@ -35,7 +35,7 @@ Why it is built this way:
   to be thrown away; only ``edge_periods`` periods at each end, where the
   zero-phase filters ring, are left out. As in the paper, the acceleration
   comes from the velocity channel by central differences and the
-  displacement by the trapezoidal rule (:func:`~identification.signals.kinematics`);
+  displacement by the trapezoidal rule (:func:`~identification.measurements.signals.kinematics`);
   both are zero-phase, so their small gain errors (``(ωh)²/6`` and
   ``(ωh)²/12``, 7e-4 and 3e-4 at 100 Hz and 10 kHz) act on the stiffness and
   never leak into the damping. Several records (assemblies, runs) are fitted
@@ -109,10 +109,9 @@ import numpy as np
 import pysindy as ps
 from numpy.typing import ArrayLike
 
-from identification import harmonic, pll
+from identification.analytical import harmonic, pll
 from identification.effects import CATALOGUE, get_effect
-from identification.model import JointModel, Term
-from identification.signals import (
+from identification.measurements.signals import (
     Kinematics,
     amplitude_envelope,
     bandpass,
@@ -120,6 +119,7 @@ from identification.signals import (
     lowpass,
     unscale_coefficients,
 )
+from identification.model import JointModel, Term
 
 __all__ = [
     "EQ3_SYMBOLS",
@@ -251,7 +251,8 @@ def design_matrix(
     Parameters
     ----------
     kin
-        Band-limited kinematics of the record (:func:`~identification.signals.kinematics`).
+        Band-limited kinematics of the record
+        (:func:`~identification.measurements.signals.kinematics`).
     terms
         Library columns.
     offset
@@ -761,7 +762,7 @@ def admissible(model: JointModel, amplitudes_m: ArrayLike) -> bool:
     feeds power in), so a model without damping, or whose damping turns
     negative inside the tested range, contradicts the data, however small its
     regression error, and a phase-locked loop cannot run it there.
-    Single-harmonic balance (:func:`identification.harmonic.backbone`).
+    Single-harmonic balance (:func:`identification.analytical.harmonic.backbone`).
     """
     if not model.terms:
         return False
@@ -947,13 +948,13 @@ def comparison_table(
 
 
 def record_kinematics(record: Any, **options: Any) -> Kinematics:
-    """Band-limited kinematics of a :class:`~identification.records.Record`."""
+    """Band-limited kinematics of a :class:`~identification.measurements.records.Record`."""
     return kinematics(record.time_s, record.response_velocity, record.excitation_velocity,
                       record.frequency_hz, record.sampling_rate_hz, **options)  # fmt: skip
 
 
 def identify(records: Any, effects: Sequence[str], **options: Any) -> Identification:
-    """Identify a joint model from test records (:class:`~identification.records.Record`).
+    """Identify a joint model from test records (:class:`~.measurements.records.Record`).
 
     ``records`` is one record or a sequence of them, fitted jointly; all must
     share one sampling rate. ``options`` are those of :func:`identify_arrays`.
@@ -1030,7 +1031,7 @@ def identify_arrays(
     offset_iterations
         Mean-offset reconstructions (:func:`mean_offset`) after the first fit; 0 disables.
     n_harmonics, edge_periods
-        Preprocessing (:func:`~identification.signals.kinematics`).
+        Preprocessing (:func:`~identification.measurements.signals.kinematics`).
     labels
         Names of the records for error messages (file paths).
 
@@ -1292,7 +1293,7 @@ class Validation:
 def validate(model: JointModel, kin: Kinematics) -> Validation:
     """Simulate ``model`` under the record's base acceleration and compare.
 
-    The simulation (:func:`identification.pll.simulate_base_excitation`)
+    The simulation (:func:`identification.analytical.pll.simulate_base_excitation`)
     starts from the record's first displacement and velocity; its velocity and
     acceleration pass the record's band-pass, so that both sides are compared
     in the same band, and are compared over the valid samples.

@@ -140,8 +140,8 @@ def run_demo(out: str | Path = "demo_out", size: str = "full", workers: int | No
         )
     )
 
-    from identification.fit import default_free
-    from identification.records import Campaign
+    from identification.fitting.fit import default_free
+    from identification.measurements.records import Campaign
 
     labels = stages.run(
         "per-record labels", pipeline.record_labels, list(Campaign(records)), model,

@@ -30,7 +30,7 @@ from pytensor.link.numba.dispatch.basic import numba_njit, register_funcify_defa
 from scipy import stats
 from sklearn.covariance import ledoit_wolf_shrinkage
 
-from identification.backbone import BackboneSet
+from identification.measurements.backbone import BackboneSet
 from pm_joint.fitting import UNBOUNDED_CANDIDATES, DistributionFit, fit_best
 from pm_joint.ops import BACKBONE_COLUMNS
 
@@ -144,7 +144,7 @@ class BackboneDensity:
         Parameters
         ----------
         measured
-            A :class:`~identification.backbone.BackboneSet`, or a ready matrix
+            A :class:`~identification.measurements.backbone.BackboneSet`, or a ready matrix
             (n_curves, n_levels × n_channels).
         amplitudes_m
             Amplitude levels (m); default :func:`amplitude_levels` of ``measured``.

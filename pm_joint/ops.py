@@ -46,10 +46,10 @@ from pytensor.graph.op import Op
 from pytensor.graph.replace import _vectorize_node
 from scipy import special
 
+from identification.analytical.pll import PLLConfig, pll_backbones
 from identification.checks import positive_vector
 from identification.effects import CATALOGUE
 from identification.model import JointModel
-from identification.pll import PLLConfig, pll_backbones
 from surrogates.runtime import SurrogateRuntime
 
 __all__ = [
@@ -239,7 +239,7 @@ class PLLOp(_BackboneOp):
     levels
         Base-acceleration amplitudes of the holds (m/s²).
     config
-        Test settings (:class:`~identification.pll.PLLConfig`).
+        Test settings (:class:`~identification.analytical.pll.PLLConfig`).
     executor
         ``concurrent.futures``-style executor for large batches (e.g. a
         ``dask.distributed`` Client); default: serially in the calling process,
@@ -593,7 +593,7 @@ def harmonic_backbone_graph(
 ) -> pt.TensorVariable:
     """Single-harmonic backbone of ``model`` as a native, differentiable pytensor graph.
 
-    Mirrors ``identification.harmonic.backbone(..., method="single")``: with the
+    Mirrors ``identification.analytical.harmonic.backbone(..., method="single")``: with the
     describing functions summed over the model's terms (:func:`describing_graph`),
     ``ω² = Σ c_i k_eq,i(a, ω)`` and ``ζ = Σ c_i c_eq,i(a, ω) / (2ω)``. Every
     catalogue ``k_eq`` is affine in ω² (only ``x·ẋ²`` depends on ω), so

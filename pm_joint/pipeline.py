@@ -21,10 +21,10 @@ matplotlib.use("Agg")  # stages write PNG files; no display is needed or wanted
 import numpy as np
 from matplotlib.figure import Figure
 
-from identification import harmonic, pll
-from identification.backbone import Backbone, BackboneSet, extract_backbones
+from identification.analytical import harmonic, pll
+from identification.measurements.backbone import Backbone, BackboneSet, extract_backbones
+from identification.measurements.records import Campaign
 from identification.model import JointModel
-from identification.records import Campaign
 from identification.rig import RIG_PRESETS, Rig
 from identification.sindy import PAPER_LIBRARY, Identification, identify, plot_validation
 
@@ -196,9 +196,9 @@ def criticize_campaign(
     ``posterior`` (a DataTree) gives the predictive bands and the medians the
     model is compared at. Writes ``criticism.json`` and figures to ``out`` (for
     the last round, whose history holds every step) and returns the last
-    :class:`~pm_joint.criticism.Criticism`.
+    :class:`~identification.criticism.criticism.Criticism`.
     """
-    from pm_joint.criticism import criticize
+    from identification.criticism.criticism import criticize
 
     if not isinstance(model, JointModel):
         model = JointModel.from_json(model)
@@ -448,7 +448,7 @@ def train_surrogate_stage(
     """Dataset (analytical + measured curves), training and ONNX export, as the paper.
 
     ``labels`` are the measured curves' parameters in the order of
-    :func:`identification.fit.default_free` (e.g. :func:`record_labels`);
+    :func:`identification.fitting.fit.default_free` (e.g. :func:`record_labels`);
     without them only analytical curves are used. The training box covers
     ± ``spread`` around the model and every label. The analytical curves
     (harmonic balance, inverted onto fixed excitation levels) make up the rest
@@ -456,7 +456,7 @@ def train_surrogate_stage(
     ``out/dataset.npz`` and a prediction figure; returns the
     :class:`~surrogates.runtime.SurrogateRuntime`.
     """
-    from identification.fit import default_free
+    from identification.fitting.fit import default_free
     from surrogates.dataset import add_measured, default_bounds, generate_dataset
     from surrogates.export import export_surrogate
     from surrogates.runtime import SurrogateRuntime

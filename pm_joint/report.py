@@ -27,7 +27,7 @@ import xarray as xr
 from matplotlib.figure import Figure
 
 from identification.artifacts import atomic_write_bytes, atomic_write_text
-from identification.backbone import BackboneSet
+from identification.measurements.backbone import BackboneSet
 from pm_joint.fitting import CANDIDATES, distances, fit_best
 from pm_joint.likelihood import BackboneDensity, level_marks
 

@@ -42,7 +42,7 @@ from pymc.blocking import DictToArrayBijection
 from pymc.stats.convergence import log_warnings, run_convergence_checks
 
 from identification.artifacts import check_sha256, versions
-from identification.backbone import Backbone, BackboneSet
+from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
 from pm_joint.likelihood import (
     BackboneAmplitude,
@@ -242,7 +242,7 @@ def _check_reaches_levels(op, forward: str, bounds, density: BackboneDensity) ->
 
 def _pll_levels_for(model: JointModel, amplitudes_m: np.ndarray, n: int) -> np.ndarray:
     """``n`` base-acceleration levels whose harmonic-balance amplitudes span the grid."""
-    from identification.harmonic import backbone
+    from identification.analytical.harmonic import backbone
 
     hb = backbone(model, amplitudes_m)
     levels = np.abs(hb.base_acceleration[hb.converged])
@@ -675,7 +675,7 @@ def synthetic_campaign(
     ``frequency_noise_hz`` on each frequency, ``damping_noise`` relative on each
     damping ratio. Returns the curves and the θ_i ``(n_curves, len(names))``.
     """
-    from identification.harmonic import backbone
+    from identification.analytical.harmonic import backbone
 
     rng = np.random.default_rng(rng)
     theta0 = np.array([model.parameters[n] for n in names])

@@ -12,7 +12,7 @@ This module builds such datasets:
 2. **Levels.** By default the ``n_levels`` levels that hold the *nominal* model
    at amplitudes spaced geometrically over ``amplitude_range_m``.
 3. **Backbones.** ``method="harmonic"``: the harmonic-balance backbone
-   (:func:`identification.harmonic.backbone`) gives the excitation ``A(a)``
+   (:func:`identification.analytical.harmonic.backbone`) gives the excitation ``A(a)``
    needed at a response amplitude ``a``; it is evaluated on a geometric
    amplitude grid, each level is bracketed at its **first crossing** and the
    root ``A(a) = level`` is refined with Chandrupatla's method
@@ -21,7 +21,7 @@ This module builds such datasets:
    level), the first crossing is the branch a test stepping its level *up*
    follows; such sets are kept and flagged (``non_monotone="first"``) or
    dropped (``"drop"``). ``method="pll"``: the time-domain PLL simulator
-   (:func:`identification.pll.pll_backbones`) runs directly on the levels
+   (:func:`identification.analytical.pll.pll_backbones`) runs directly on the levels
    (slower; unlocked levels fail the set). Failed sets (no convergence, a level
    out of reach, no lock) are dropped, counted, and kept with their reasons.
 4. **Measured curves** (:func:`add_measured`), as the paper trained on 25
@@ -54,10 +54,10 @@ from scipy.optimize import elementwise
 from scipy.stats import qmc
 from tqdm.auto import tqdm
 
+from identification.analytical.harmonic import backbone
 from identification.artifacts import atomic_write_bytes, sha256_bytes, versions
-from identification.backbone import BackboneSet
-from identification.fit import default_free, resolve_method
-from identification.harmonic import backbone
+from identification.fitting.fit import default_free, resolve_method
+from identification.measurements.backbone import BackboneSet
 from identification.model import JointModel
 from surrogates.runtime import SurrogateSpec
 
@@ -402,7 +402,7 @@ def _harmonic_chunk(
 
 
 def _pll_outcomes(model, names, parameters, levels, config, executor, progress) -> list[_Outcome]:
-    from identification.pll import pll_backbones
+    from identification.analytical.pll import pll_backbones
 
     result = pll_backbones(
         model, levels, parameters, names, config, executor=executor, progress=progress
@@ -455,7 +455,7 @@ def generate_dataset(
         Template model; the named parameters vary, the others stay at its values.
     names
         Parameters that vary (:attr:`JointModel.parameter_names`); default
-        :func:`identification.fit.default_free` (all but a redundant Jenkins coefficient).
+        :func:`identification.fitting.fit.default_free` (all but a redundant Jenkins coefficient).
     n
         Parameter sets drawn (failed ones are dropped, so the dataset may hold fewer).
     spread, bounds
@@ -468,11 +468,12 @@ def generate_dataset(
         ``grid_points`` geometric points).
     method
         ``"harmonic"`` (harmonic balance inverted onto the levels) or ``"pll"``
-        (time-domain PLL simulation, :class:`~identification.pll.PLLConfig` ``pll_config``).
+        (time-domain PLL simulation, :class:`~identification.analytical.pll.PLLConfig`
+        ``pll_config``).
     harmonic, harmonics
         Harmonic balance: ``"single"``, ``"multi"`` with ``harmonics``, or
         ``"auto"`` (multi only for models with even terms; see
-        :func:`identification.fit.resolve_method`).
+        :func:`identification.fitting.fit.resolve_method`).
     channels
         Backbone channels kept, from ``amplitude_m``, ``frequency_hz``, ``damping_ratio``.
     sampler, seed
@@ -649,12 +650,12 @@ def add_measured(
         Measured curves, each on its own excitation levels.
     labels
         ``(n_curves, n_params)`` parameters of each curve (e.g. from fitting the
-        model to that curve alone, :func:`identification.fit.fit_backbones`), in
+        model to that curve alone, :func:`identification.fitting.fit.fit_backbones`), in
         the order of ``dataset.spec.parameter_names``.
     level_gain
         How a point's base-acceleration amplitude is known. None: from the power
         balance of the point itself, ``A = 2 D ω² a / cos(phase error)`` (the
-        extraction's damping ratio, :mod:`identification.backbone`), which needs
+        extraction's damping ratio, :mod:`identification.measurements.backbone`), which needs
         no shaker calibration. A number: ``excitation_level × level_gain``
         (m/s² per unit of the record's level, e.g. per shaker volt).
 

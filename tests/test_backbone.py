@@ -9,14 +9,14 @@ import pandas as pd
 import pytest
 from scipy.integrate import cumulative_trapezoid
 
-from identification.backbone import (
+from identification.measurements.backbone import (
     TABLE_COLUMNS,
     Backbone,
     BackboneSet,
     extract_backbone,
     extract_backbones,
 )
-from identification.records import Campaign, Record, StepSchedule, write_record
+from identification.measurements.records import Campaign, Record, StepSchedule, write_record
 
 FS = 10_000.0
 HOLD_S = 0.8  # 80 periods at 100 Hz: room for the 70 measured ones

@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from identification.backbone import Backbone, BackboneSet
-from identification.harmonic import backbone as harmonic_backbone
-from identification.model import JointModel
-from identification.rig import HIDDEN_EFFECT_SCENARIOS
-from pm_joint.criticism import (
+from identification.analytical.harmonic import backbone as harmonic_backbone
+from identification.criticism.criticism import (
     KEY_CHANNEL,
     criticize,
     hidden_effect_study,
     plot_history,
 )
+from identification.measurements.backbone import Backbone, BackboneSet
+from identification.model import JointModel
+from identification.rig import HIDDEN_EFFECT_SCENARIOS
 
 W0 = 2 * np.pi * 101.0
 K0 = W0**2

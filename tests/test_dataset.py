@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 import torch
 
-from identification.backbone import Backbone, BackboneSet
-from identification.harmonic import backbone
+from identification.analytical.harmonic import backbone
+from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS
 from surrogates.dataset import (

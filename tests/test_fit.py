@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from identification.backbone import Backbone, BackboneSet, extract_backbone
-from identification.fit import (
+from identification.analytical.harmonic import backbone as harmonic_backbone
+from identification.fitting.fit import (
     NOISE_FLOOR,
     HoldHarmonics,
     evaluate,
@@ -15,9 +15,9 @@ from identification.fit import (
     fit_data,
     measurement_levels,
 )
-from identification.harmonic import backbone as harmonic_backbone
+from identification.measurements.backbone import Backbone, BackboneSet, extract_backbone
+from identification.measurements.records import Record, StepSchedule
 from identification.model import JointModel
-from identification.records import Record, StepSchedule
 from identification.rig import trc_channels
 
 W0 = 2 * np.pi * 101.0

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import integrate, optimize
 
-from identification.harmonic import backbone
+from identification.analytical.harmonic import backbone
 from identification.model import JointModel
 
 W0 = 2 * np.pi * 100.0  # rad/s

@@ -7,8 +7,8 @@ import pytensor.tensor as pt
 import pytest
 from scipy import stats
 
-from identification import harmonic
-from identification.backbone import Backbone, BackboneSet
+from identification.analytical import harmonic
+from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
 from pm_joint.likelihood import (
     BackboneAmplitude,

@@ -1,7 +1,7 @@
 """Forward-model Ops: native harmonic-balance graph, ONNX surrogate Op, PLL Op.
 
 Independent expectations: the numpy single- and multi-harmonic backbones of
-``identification.harmonic``, central finite differences, onnxruntime itself,
+``identification.analytical.harmonic``, central finite differences, onnxruntime itself,
 torch autograd on the trained network (in float64), and the time-domain PLL.
 """
 
@@ -18,10 +18,10 @@ import pytest
 import torch
 from pytensor.graph.replace import vectorize_graph
 
+from identification.analytical.harmonic import backbone
+from identification.analytical.pll import pll_backbones
 from identification.effects import CATALOGUE
-from identification.harmonic import backbone
 from identification.model import JointModel
-from identification.pll import pll_backbones
 from pm_joint.ops import (
     BACKBONE_COLUMNS,
     HarmonicBalanceOp,

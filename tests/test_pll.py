@@ -1,7 +1,7 @@
 """Tests of the PLL phase-resonance simulator and the open-loop integrator.
 
 Independent expectations: closed-form single-harmonic Duffing backbone,
-multi-harmonic balance (:mod:`identification.harmonic`), the analytical
+multi-harmonic balance (:mod:`identification.analytical.harmonic`), the analytical
 steady state of a linear oscillator, scipy's DOP853, the Masing rule.
 """
 
@@ -12,9 +12,8 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from identification.harmonic import backbone
-from identification.model import JointModel
-from identification.pll import (
+from identification.analytical.harmonic import backbone
+from identification.analytical.pll import (
     PLLConfig,
     PLLGains,
     design_gains,
@@ -24,6 +23,7 @@ from identification.pll import (
     stable_substeps,
     target_phase_deg,
 )
+from identification.model import JointModel
 
 OMEGA0 = 2 * np.pi * 100.0
 ZETA = 0.003

@@ -32,12 +32,12 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from identification import records
 from identification.artifacts import IntegrityError, sha256_bytes
-from identification.backbone import Backbone, extract_backbone
 from identification.effects import CATALOGUE
+from identification.measurements import records
+from identification.measurements.backbone import Backbone, extract_backbone
+from identification.measurements.records import DATA_COLUMNS, Record, StepSchedule, read_record
 from identification.model import JointModel
-from identification.records import DATA_COLUMNS, Record, StepSchedule, read_record
 from pm_joint.likelihood import BackboneDensity
 from surrogates.runtime import MODEL_FILE, SIDECAR_FILE, SurrogateRuntime, SurrogateSpec
 
@@ -266,7 +266,7 @@ def synthetic_records(draw):
 
     Per hold: base velocity ``B cos φ``, relative velocity ``A ω sin φ`` (lagging
     by 90°), frequency channel f; so amplitude A, frequency f and damping ratio
-    ``B / (2 A ω)`` (module notes of :mod:`identification.backbone`).
+    ``B / (2 A ω)`` (module notes of :mod:`identification.measurements.backbone`).
     """
     n_holds = draw(st.integers(1, 3))
     holds = [

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identification.records import (
+from identification.measurements.records import (
     DATA_COLUMNS,
     Campaign,
     Hold,

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from arviz_base import from_dict
 
-from identification import harmonic
-from identification.backbone import Backbone, BackboneSet
+from identification.analytical import harmonic
+from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
 from pm_joint.likelihood import BackboneDensity, amplitude_levels, level_marks
 from pm_joint.report import (

@@ -15,9 +15,9 @@ import pymc as pm
 import pytest
 import torch
 
-from identification import harmonic
+from identification.analytical import harmonic
 from identification.artifacts import sha256_file
-from identification.backbone import Backbone, BackboneSet
+from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
 from identification.rig import Rig
 from identification.sindy import identify

@@ -6,10 +6,10 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from identification.backbone import extract_backbones
-from identification.harmonic import backbone as harmonic_backbone
+from identification.analytical.harmonic import backbone as harmonic_backbone
+from identification.measurements.backbone import extract_backbones
+from identification.measurements.records import Campaign, Record, read_steps
 from identification.model import JointModel
-from identification.records import Campaign, Record, read_steps
 from identification.rig import (
     GROUND_TRUTH_FILE,
     RIG_PRESETS,
@@ -67,7 +67,7 @@ def test_sensor_noise_is_white_independent_and_of_the_stated_level():
 
 
 def _steps_over(t):
-    from identification.records import StepSchedule
+    from identification.measurements.records import StepSchedule
 
     return StepSchedule([t[0], t[-1]], [1.0, 1.0])
 
@@ -162,7 +162,9 @@ def test_rig_round_trip_recovers_the_ground_truth(tmp_path):
     The extracted backbone of every record matches the harmonic-balance backbone
     of that record's drawn ground truth at the extracted amplitudes.
     """
-    pytest.importorskip("identification.pll", reason="the PLL simulator is not available")
+    pytest.importorskip(
+        "identification.analytical.pll", reason="the PLL simulator is not available"
+    )
     rig = Rig.preset("trc-like", levels=6, hold_s=2.5, noise_m_s=1e-4)
     campaign = rig.write_campaign(tmp_path, assemblies=2, seed=11)
     curves = extract_backbones(campaign)

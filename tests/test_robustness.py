@@ -31,10 +31,11 @@ import pymc as pm
 import pytensor.tensor as pt
 import pytest
 
-from identification import harmonic, records
-from identification.backbone import Backbone, BackboneSet
+from identification.analytical import harmonic
+from identification.measurements import records
+from identification.measurements.backbone import Backbone, BackboneSet
+from identification.measurements.records import DATA_COLUMNS, StepSchedule, read_record
 from identification.model import JointModel
-from identification.records import DATA_COLUMNS, StepSchedule, read_record
 from identification.rig import Rig
 from pm_joint.likelihood import BackboneAmplitude, NanCounter
 from pm_joint.ops import SurrogateOp

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from identification.signals import (
+from identification.measurements.signals import (
     amplitude_envelope,
     bandpass,
     central_difference,

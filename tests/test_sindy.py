@@ -20,13 +20,13 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from identification import harmonic
-from identification.backbone import extract_backbones
+from identification.analytical import harmonic
 from identification.effects import CATALOGUE, restoring_force
+from identification.measurements.backbone import extract_backbones
+from identification.measurements.records import DATA_COLUMNS, Record, StepSchedule, record_name
+from identification.measurements.signals import kinematics
 from identification.model import JointModel
-from identification.records import DATA_COLUMNS, Record, StepSchedule, record_name
 from identification.rig import Rig, read_ground_truth
-from identification.signals import kinematics
 from identification.sindy import (
     EQ3_SYMBOLS,
     PAPER_LIBRARY,

@@ -23,10 +23,10 @@ import pytest
 import torch
 from scipy import stats
 
-from identification.backbone import Backbone, BackboneSet, extract_backbones
-from identification.harmonic import backbone
+from identification.analytical.harmonic import backbone
+from identification.analytical.pll import pll_backbones
+from identification.measurements.backbone import Backbone, BackboneSet, extract_backbones
 from identification.model import JointModel
-from identification.pll import pll_backbones
 from identification.rig import RIG_PRESETS, Rig, read_ground_truth
 from pm_joint.likelihood import NanCounter, amplitude_levels, level_marks
 from pm_joint.ops import HarmonicBalanceOp, PLLOp, SurrogateOp

@@ -85,9 +85,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 from tqdm.auto import tqdm
 
+from identification.analytical.harmonic import CoefficientTable, coefficient_table
 from identification.checks import positive_vector
 from identification.effects import CATALOGUE, jenkins_force, memoryless_force
-from identification.harmonic import CoefficientTable, coefficient_table
 from identification.model import JointModel
 
 __all__ = [

@@ -3,7 +3,7 @@
 The model's named parameters (:attr:`JointModel.parameter_names`: coefficients
 and shape parameters such as ``microslip.k_t`` or ``stribeck_friction.v_s``) are
 fitted by least squares (:func:`scipy.optimize.least_squares`) so that its
-harmonic-balance backbone (:func:`identification.harmonic.backbone`) meets the
+harmonic-balance backbone (:func:`identification.analytical.harmonic.backbone`) meets the
 measured ones in **both** channels: friction shows in the damping, stiffness in
 the frequency. With test records, the higher harmonics of the response are a
 third channel (:func:`extract_harmonics`): even terms such as ``x²`` leave a
@@ -37,11 +37,16 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
-from identification.backbone import BackboneSet, ShortHoldError, fourier_basis, hold_window
+from identification.analytical.harmonic import backbone
 from identification.effects import CATALOGUE, get_effect
-from identification.harmonic import backbone
+from identification.measurements.backbone import (
+    BackboneSet,
+    ShortHoldError,
+    fourier_basis,
+    hold_window,
+)
+from identification.measurements.records import Record
 from identification.model import JointModel
-from identification.records import Record
 
 __all__ = [
     "BACKBONE_CHANNELS",
@@ -119,7 +124,7 @@ def _hold_harmonics(
 ) -> tuple[float, np.ndarray, np.ndarray]:
     """Fundamental amplitude, relative harmonics and their standard errors of one hold.
 
-    The window of :func:`identification.backbone.hold_window` (the one backbone
+    The window of :func:`identification.measurements.backbone.hold_window` (the one backbone
     points use), a constant plus ``harmonics`` harmonics fitted to the velocity.
     The displacement's mean is not observable from velocities, so only ``h ≥ 1``.
     """
@@ -146,7 +151,7 @@ def extract_harmonics(records: Iterable[Record], n_periods: int = 70) -> dict[st
     """Second and third harmonics of every hold phase of every record, by record name.
 
     Uses the same hold phases and window as
-    :func:`identification.backbone.extract_backbone` (a hold shorter than
+    :func:`identification.measurements.backbone.extract_backbone` (a hold shorter than
     ``n_periods`` uses its whole periods), so row ``i`` belongs to backbone point ``i``.
     """
     out = {}
@@ -435,7 +440,7 @@ def predict_channels(
     """Model prediction of each channel at the given amplitudes.
 
     Returns ``(n_points, n_channels)``, or ``(n_sets, n_points, n_channels)`` with
-    ``parameters`` (see :func:`identification.harmonic.backbone`); NaN where the
+    ``parameters`` (see :func:`identification.analytical.harmonic.backbone`); NaN where the
     harmonic balance has no solution.
     """
     a = np.asarray(amplitude_m, dtype=float)

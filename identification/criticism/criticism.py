@@ -16,7 +16,7 @@ physics* is missing. The loop a user runs::
 * **Where.** Runs of consecutive levels where the mean residual exceeds
   ``z`` standard errors, per channel, in words and as data.
 * **Missing.** Every catalogue effect the model lacks is added and the extended
-  model refitted (:func:`identification.fit.fit_backbones`); the error reduction
+  model refitted (:func:`identification.fitting.fit.fit_backbones`); the error reduction
   and the change of an information criterion against the refitted model without
   it (BIC by default) rank them. Only effects with ``ΔIC`` below ``threshold``
   (default −10: "very strong" evidence) are proposed. Each gets the signature it
@@ -42,9 +42,8 @@ from typing import Any
 import numpy as np
 
 from identification.artifacts import atomic_write_bytes, atomic_write_text
-from identification.backbone import BackboneSet, extract_backbone
 from identification.effects import CATALOGUE, get_effect
-from identification.fit import (
+from identification.fitting.fit import (
     BACKBONE_CHANNELS,
     HARMONIC_ORDERS,
     FitData,
@@ -57,8 +56,9 @@ from identification.fit import (
     predict_channels,
     resolve_method,
 )
+from identification.measurements.backbone import BackboneSet, extract_backbone
+from identification.measurements.records import Record
 from identification.model import JointModel
-from identification.records import Record
 
 __all__ = [
     "AMBIGUITY",
@@ -307,7 +307,7 @@ class Criticism:
     model
         The model criticised (the posterior median when a posterior was given).
     data
-        The measured data (:class:`identification.fit.FitData`).
+        The measured data (:class:`identification.fitting.fit.FitData`).
     fit
         The model as given against the data (no refit).
     history
@@ -871,7 +871,7 @@ def criticize(
     method
         Harmonic balance: ``"auto"``, ``"single"`` or ``"multi"``.
     weights, noise_floor
-        See :func:`identification.fit.fit_backbones`.
+        See :func:`identification.fitting.fit.fit_backbones`.
     n_periods
         Periods per hold used for the backbone points and harmonics of ``records``.
     z

@@ -1,6 +1,6 @@
 """Backbone curves: containers and their extraction from phase-resonance records.
 
-A backbone point comes from one hold phase of a record (:mod:`identification.records`):
+A backbone point comes from one hold phase of a record (:mod:`identification.measurements.records`):
 the last ``N`` excitation periods are fitted with a Fourier series whose phase
 ``φ(t) = 2π ∫ f(t) dt`` is the integral of the record's instantaneous-frequency
 channel, so a slowly drifting PLL frequency is followed exactly and no
@@ -35,7 +35,7 @@ from scipy.integrate import cumulative_trapezoid
 from scipy.interpolate import make_interp_spline
 
 from identification.artifacts import atomic_write_text
-from identification.records import Hold, Record
+from identification.measurements.records import Hold, Record
 
 __all__ = [
     "TABLE_COLUMNS",
