@@ -1,4 +1,4 @@
-"""Identify a joint model from test records: checks, shape grid, offset iterations, the report.
+"""Identify a joint model from test records: input checks, shape grid, mean-offset iterations.
 
 **Data.** Whole records, ramps and PLL transients included: the equation of
 motion holds at every instant, not only in steady state, so no sample needs to
