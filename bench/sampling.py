@@ -6,7 +6,7 @@ reassembly draws, PLL backbones at its 12 levels), the paper's likelihood
 uniform priors on every coefficient of the model structure, as the paper
 updates all of its model's: linear, viscous, cubic, and the microslip element's
 stiffness and slip force (the Jenkins coefficient is redundant with those two,
-:func:`identification.fitting.fit.default_free`). Boxes: ± 4 population spreads for the
+:func:`identification.fitting.least_squares.default_free`). Boxes: ± 4 population spreads for the
 coefficients the rig varies, ± 10 % for the microslip stiffness. The frequency
 likelihood does not see viscous damping (as in the paper, flat directions come
 with it). A surrogate is trained here first on that box (harmonic-balance
@@ -52,7 +52,7 @@ import numpy as np
 import torch
 
 from identification.analytical.pll import pll_backbones
-from identification.fitting.fit import default_free
+from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.rig import RIG_PRESETS, Rig
 from pm_joint.updating import build_model, sample

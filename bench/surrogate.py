@@ -34,7 +34,7 @@ import time
 import numpy as np
 import torch
 
-from identification.fitting.fit import default_free
+from identification.fitting.least_squares import default_free
 from identification.rig import RIG_PRESETS
 from surrogates.dataset import generate_dataset
 from surrogates.evaluate import PAPER_TABLE5, backbone_metrics, table5_study

@@ -33,7 +33,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-from identification.fitting.fit import default_free
+from identification.fitting.least_squares import default_free
 from identification.measurements.records import Campaign
 from identification.sindy import PAPER_LIBRARY
 from pm_joint import pipeline

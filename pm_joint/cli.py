@@ -71,7 +71,7 @@ def _cmd_identify(args: argparse.Namespace) -> None:
 
 
 def _cmd_train_surrogate(args: argparse.Namespace) -> None:
-    from identification.fitting.fit import default_free
+    from identification.fitting.least_squares import default_free
     from identification.measurements.records import Campaign
     from pm_joint.pipeline import campaign_backbones, record_labels, train_surrogate_stage
 

@@ -140,7 +140,7 @@ def run_demo(out: str | Path = "demo_out", size: str = "full", workers: int | No
         )
     )
 
-    from identification.fitting.fit import default_free
+    from identification.fitting.least_squares import default_free
     from identification.measurements.records import Campaign
 
     labels = stages.run(

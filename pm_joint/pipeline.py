@@ -22,7 +22,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from identification.analytical import harmonic, pll
-from identification.measurements.backbone import Backbone, BackboneSet, extract_backbones
+from identification.measurements.backbone import Backbone, BackboneSet
+from identification.measurements.extraction import extract_backbones
 from identification.measurements.records import Campaign
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS, Rig
@@ -186,27 +187,25 @@ def criticize_campaign(
     out: str | os.PathLike,
     *,
     rounds: int = 0,
-    use_records: bool = True,
     measured: BackboneSet | None = None,
     posterior=None,
 ):
     """Criticize a model against a campaign; optionally add the best effect ``rounds`` times.
 
-    ``measured`` are the campaign's backbones when already extracted;
+    ``measured`` are the campaign's backbones when already extracted (with the
+    harmonics they carry); else they are extracted from the records once.
     ``posterior`` (a DataTree) gives the predictive bands and the medians the
     model is compared at. Writes ``criticism.json`` and figures to ``out`` (for
     the last round, whose history holds every step) and returns the last
     :class:`~identification.criticism.criticism.Criticism`.
     """
-    from identification.criticism.criticism import criticize
+    from pm_joint.analysis.posterior import criticize
 
     if not isinstance(model, JointModel):
         model = JointModel.from_json(model)
-    campaign = Campaign(folder)
-    records = list(campaign) if use_records else None
-    if measured is None and records is None:
-        measured = extract_backbones(campaign)
-    crit = criticize(model, measured, records=records, posterior=posterior)
+    if measured is None:
+        measured = extract_backbones(Campaign(folder))
+    crit = criticize(model, measured, posterior=posterior)
     for _ in range(rounds):
         proposals = crit.missing()
         if not proposals:
@@ -448,7 +447,7 @@ def train_surrogate_stage(
     """Dataset (analytical + measured curves), training and ONNX export, as the paper.
 
     ``labels`` are the measured curves' parameters in the order of
-    :func:`identification.fitting.fit.default_free` (e.g. :func:`record_labels`);
+    :func:`identification.fitting.least_squares.default_free` (e.g. :func:`record_labels`);
     without them only analytical curves are used. The training box covers
     ± ``spread`` around the model and every label. The analytical curves
     (harmonic balance, inverted onto fixed excitation levels) make up the rest
@@ -456,7 +455,7 @@ def train_surrogate_stage(
     ``out/dataset.npz`` and a prediction figure; returns the
     :class:`~surrogates.runtime.SurrogateRuntime`.
     """
-    from identification.fitting.fit import default_free
+    from identification.fitting.least_squares import default_free
     from surrogates.dataset import add_measured, default_bounds, generate_dataset
     from surrogates.export import export_surrogate
     from surrogates.runtime import SurrogateRuntime

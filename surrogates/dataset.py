@@ -56,7 +56,8 @@ from tqdm.auto import tqdm
 
 from identification.analytical.harmonic import backbone
 from identification.artifacts import atomic_write_bytes, sha256_bytes, versions
-from identification.fitting.fit import default_free, resolve_method
+from identification.fitting.least_squares import default_free
+from identification.fitting.prediction import resolve_method
 from identification.measurements.backbone import BackboneSet
 from identification.model import JointModel
 from surrogates.runtime import SurrogateSpec
@@ -455,7 +456,8 @@ def generate_dataset(
         Template model; the named parameters vary, the others stay at its values.
     names
         Parameters that vary (:attr:`JointModel.parameter_names`); default
-        :func:`identification.fitting.fit.default_free` (all but a redundant Jenkins coefficient).
+        :func:`identification.fitting.least_squares.default_free` (all but a redundant
+        Jenkins coefficient).
     n
         Parameter sets drawn (failed ones are dropped, so the dataset may hold fewer).
     spread, bounds
@@ -473,7 +475,7 @@ def generate_dataset(
     harmonic, harmonics
         Harmonic balance: ``"single"``, ``"multi"`` with ``harmonics``, or
         ``"auto"`` (multi only for models with even terms; see
-        :func:`identification.fitting.fit.resolve_method`).
+        :func:`identification.fitting.prediction.resolve_method`).
     channels
         Backbone channels kept, from ``amplitude_m``, ``frequency_hz``, ``damping_ratio``.
     sampler, seed
@@ -650,12 +652,12 @@ def add_measured(
         Measured curves, each on its own excitation levels.
     labels
         ``(n_curves, n_params)`` parameters of each curve (e.g. from fitting the
-        model to that curve alone, :func:`identification.fitting.fit.fit_backbones`), in
+        model to that curve alone, :func:`identification.fitting.least_squares.fit_backbones`), in
         the order of ``dataset.spec.parameter_names``.
     level_gain
         How a point's base-acceleration amplitude is known. None: from the power
         balance of the point itself, ``A = 2 D ω² a / cos(phase error)`` (the
-        extraction's damping ratio, :mod:`identification.measurements.backbone`), which needs
+        extraction's damping ratio, :mod:`identification.measurements.extraction`), which needs
         no shaker calibration. A number: ``excitation_level × level_gain``
         (m/s² per unit of the record's level, e.g. per shaker volt).
 

@@ -25,7 +25,8 @@ from scipy import stats
 
 from identification.analytical.harmonic import backbone
 from identification.analytical.pll import pll_backbones
-from identification.measurements.backbone import Backbone, BackboneSet, extract_backbones
+from identification.measurements.backbone import Backbone, BackboneSet
+from identification.measurements.extraction import extract_backbones
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS, Rig, read_ground_truth
 from pm_joint.likelihood import NanCounter, amplitude_levels, level_marks
