@@ -475,6 +475,18 @@ def test_lab_campaign_truth_and_workers_equal_serial(tmp_path):
     assert sidecar["rig"]["lab"]["controller"]["detector_order"] == 1
 
 
+def test_the_rig_command_writes_a_lab_campaign(tmp_path):
+    from pm_joint.cli import main
+
+    out = tmp_path / "campaign"
+    assert (
+        main(["rig", "lab-dropouts", "--out", str(out), "--assemblies", "1", "--levels", "1"]) == 0
+    )
+    (truth,) = read_ground_truth(out).values()
+    assert truth.lab["channel_noise_m_s"][2] == pytest.approx(3e-4)  # per-channel noise
+    assert Campaign(out)[0].data.shape == (26_000, 20)
+
+
 def test_bad_lab_settings_are_refused_with_their_name():
     with pytest.raises(ValueError, match="pll_options belong to Rig"):
         LabRig(_linear(), (1.0,), pll_options={"harmonics": 2})

@@ -120,7 +120,8 @@ class Joint:
 
     @property
     def small_amplitude_stiffness(self) -> float:
-        """Tangent stiffness at rest (1/s²)."""
+        """Equivalent stiffness at small amplitude (1/s²): the tangent at rest, or the
+        describing function's limit where the force has a kink there."""
         return 0.0
 
     @property

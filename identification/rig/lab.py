@@ -92,47 +92,19 @@ _GRID = (5, 3)
 
 # Settings vector of the kernel.
 (
-    _DT,
-    _N_SUB,
-    _RAMP,
-    _HOLD,
-    _KP,
-    _KI,
-    _STAGE_ALPHA,
-    _ORDER,
-    _BASE_REFERENCE,
-    _TARGET,
-    _OMEGA_INITIAL,
-    _OMEGA_LOW,
-    _OMEGA_HIGH,
-    _MU,
-    _OMEGA_C,
-    _K_DRIFT,
-    _DELTA0,
-    _DELTA1,
-    _GAIN0,
-    _GAIN1,
-    _GAIN_ON_PANEL,
-    _X_MAX,
-    _N_SETTINGS,
-) = range(23)
+    _DT, _N_SUB, _RAMP, _HOLD, _KP, _KI, _STAGE_ALPHA, _ORDER, _BASE_REFERENCE, _TARGET,
+    _OMEGA_INITIAL, _OMEGA_LOW, _OMEGA_HIGH, _K_DRIFT, _DELTA0, _DELTA1, _GAIN0, _GAIN1,
+    _GAIN_ON_PANEL, _X_MAX, _N_SETTINGS,
+) = range(21)  # fmt: skip
 # Second-mode vector: ω₂ (0: none), ζ₂, Γ₂, centre shape, joint shape.
 _OMEGA2, _ZETA2, _GAMMA2, _CENTRE2, _JOINT2 = range(5)
 # Hysteretic anchors: Jenkins element's displacement and force, Iwan sliders' displacement.
 _X_ANCHOR, _F_ANCHOR, _U_ANCHOR = range(3)
 #: Channels the kernel records, one row each.
 CHANNELS = (
-    "x",
-    "v",
-    "q",
-    "w",
-    "base_velocity",
-    "base_acceleration",
-    "frequency_hz",
-    "theta",
-    "level",
-    "phase_error_deg",
-)
+    "x", "v", "q", "w", "base_velocity", "base_acceleration", "frequency_hz", "theta",
+    "level", "phase_error_deg",
+)  # fmt: skip
 # What the controller's sensors add: centre-point noise, centre-point dropout value
 # (NaN where none), base-point-1 noise, its dropout value.
 _CENTRE_NOISE, _CENTRE_DROPOUT, _BASE_NOISE, _BASE_DROPOUT = range(4)
@@ -223,41 +195,26 @@ class LabTimeSeries:
 
 
 @numba.njit(cache=True, inline="always")
-def _forces(
-    indices,
-    coefficients,
-    shapes,
-    modal,
-    microslip,
-    joint_kinds,
-    joint_parameters,
-    slider_stiffness,
-    slip_forces,
-    anchors,
-    slider_forces,
-    x,
-    v,
-    u,
-    du,
-):
+def _forces(structure, anchors, slider_forces, x, v, u, du):
     """(modal force on x, nonlinear force on u), hysteretic elements from their anchors.
 
-    Catalogue terms flagged ``modal`` (the linear stiffness and viscous damping)
-    act on the first modal coordinate; every other term, the Jenkins element and
-    the joints act on the joint displacement ``u``. ``anchors`` holds the Jenkins
-    element's anchor displacement and force and the Iwan sliders' common anchor.
+    ``structure`` is the tuple the kernel receives (catalogue arrays, modal flags,
+    Jenkins element, joints, Iwan sliders, second mode, shaker). Catalogue terms
+    flagged modal (the linear stiffness and viscous damping) act on the first modal
+    coordinate; every other term, the Jenkins element and the joints act on the joint
+    displacement ``u``. ``anchors`` holds the Jenkins element's anchor displacement
+    and force and the Iwan sliders' common anchor.
     """
+    indices, coefficients, shapes, modal, microslip = structure[:5]
+    joint_kinds, joint_parameters, slider_stiffness, slip_forces = structure[5:9]
     f_modal = 0.0
     f_joint = 0.0
     for i in range(indices.size):
+        p0, p1 = shapes[i, 0], shapes[i, 1]
         if modal[i]:
-            f_modal += coefficients[i] * memoryless_force(
-                indices[i], x, v, shapes[i, 0], shapes[i, 1]
-            )
+            f_modal += coefficients[i] * memoryless_force(indices[i], x, v, p0, p1)
         else:
-            f_joint += coefficients[i] * memoryless_force(
-                indices[i], u, du, shapes[i, 0], shapes[i, 1]
-            )
+            f_joint += coefficients[i] * memoryless_force(indices[i], u, du, p0, p1)
     if microslip[0] != 0.0:
         f_joint += microslip[0] * jenkins_force(
             u, anchors[_X_ANCHOR], anchors[_F_ANCHOR], microslip[1], microslip[2]
@@ -271,60 +228,19 @@ def _forces(
 
 
 @numba.njit(cache=True, inline="always")
-def _derivatives(
-    indices,
-    coefficients,
-    shapes,
-    modal,
-    microslip,
-    joint_kinds,
-    joint_parameters,
-    slider_stiffness,
-    slip_forces,
-    mode2,
-    shaker,
-    anchors,
-    slider_forces,
-    dk,
-    x,
-    v,
-    q,
-    w,
-    vb,
-    coil,
-):
-    """Time derivatives of ``(x, ẋ, q, q̇, v_base)`` and the base acceleration.
+def _derivatives(structure, anchors, slider_forces, dk, x, v, q, w, vb, coil):
+    """Time derivatives of ``(x, ẋ, q, q̇, v_base)``; the last is the base acceleration.
 
-    ``shaker`` is ``(μ, ω_c)``, ``coil`` the coil acceleration, ``dk`` the drift's stiffness.
+    ``coil`` is the coil acceleration, ``dk`` the drift's stiffness.
     """
+    mode2, shaker = structure[9], structure[10]
     b = mode2[_JOINT2]
-    f_modal, f_joint = _forces(
-        indices,
-        coefficients,
-        shapes,
-        modal,
-        microslip,
-        joint_kinds,
-        joint_parameters,
-        slider_stiffness,
-        slip_forces,
-        anchors,
-        slider_forces,
-        x,
-        v,
-        x + b * q,
-        v + b * w,
-    )
+    f_modal, f_joint = _forces(structure, anchors, slider_forces, x, v, x + b * q, v + b * w)
     f1 = f_modal + f_joint + dk * x
     a_base = coil + shaker[0] * f1 - shaker[1] * vb
     omega2 = mode2[_OMEGA2]
-    q_acceleration = (
-        -2.0 * mode2[_ZETA2] * omega2 * w
-        - omega2 * omega2 * q
-        - b * f_joint
-        - mode2[_GAMMA2] * a_base
-    )
-    return v, -f1 - a_base, w, q_acceleration, a_base
+    q_acceleration = -2.0 * mode2[_ZETA2] * omega2 * w - omega2 * omega2 * q - b * f_joint
+    return v, -f1 - a_base, w, q_acceleration - mode2[_GAMMA2] * a_base, a_base
 
 
 @numba.njit(cache=True, inline="always")
@@ -348,24 +264,17 @@ def _wrap(angle):
     return angle - 2.0 * np.pi * np.ceil((angle - np.pi) / (2.0 * np.pi))
 
 
+@numba.njit(cache=True, inline="always")
+def _demodulate(filters, k, value, alpha):
+    """One sample through the ``k``-th cascade of first-order low passes; its output."""
+    for stage in range(filters.shape[1]):
+        filters[k, stage] += alpha * (value - filters[k, stage])
+        value = filters[k, stage]
+    return value
+
+
 @numba.njit(cache=True)
-def _lab_kernel(
-    indices,
-    coefficients,
-    shapes,
-    modal,
-    microslip,
-    joint_kinds,
-    joint_parameters,
-    slider_stiffness,
-    slip_forces,
-    mode2,
-    distortion,
-    levels,
-    settings,
-    sensors,
-    out,
-):
+def _lab_kernel(structure, distortion, levels, settings, sensors, out):
     """Run the whole schedule; fills ``out`` (len(CHANNELS), n) and returns the samples done."""
     dt = settings[_DT]
     n_sub = int(settings[_N_SUB])
@@ -373,15 +282,14 @@ def _lab_kernel(
     per_level = ramp + int(settings[_HOLD])
     kp, ki = settings[_KP], settings[_KI]
     alpha = settings[_STAGE_ALPHA]
-    order = int(settings[_ORDER])
     base_reference = settings[_BASE_REFERENCE] > 0.0
     target = settings[_TARGET]
     omega_low, omega_high = settings[_OMEGA_LOW], settings[_OMEGA_HIGH]
-    shaker = np.array([settings[_MU], settings[_OMEGA_C]])
     k_drift, delta0, delta1 = settings[_K_DRIFT], settings[_DELTA0], settings[_DELTA1]
     gain0, gain1 = settings[_GAIN0], settings[_GAIN1]
     gain_on_panel = settings[_GAIN_ON_PANEL] > 0.0
     x_max = settings[_X_MAX]
+    slider_stiffness, slip_forces, mode2 = structure[7], structure[8], structure[9]
     centre2, b = mode2[_CENTRE2], mode2[_JOINT2]
 
     n_total = out.shape[1]
@@ -392,7 +300,8 @@ def _lab_kernel(
     omega = settings[_OMEGA_INITIAL]
     integral = omega
     control_on = False
-    filters = np.zeros((4, order))  # I and Q of the response, then of the reference
+    # I and Q of the response, then of the reference, each a cascade of low passes
+    filters = np.zeros((4, int(settings[_ORDER])))
     coil = np.empty(2 * n_sub + 1)
     a_from = 0.0
     h = dt / n_sub
@@ -407,34 +316,9 @@ def _lab_kernel(
         dk = k_drift * ((1.0 + delta) ** 2 - 1.0)
         gain = gain0 + (gain1 - gain0) * fraction
         amplitude = _ramp(a_from, a_to, in_level, ramp)
-        # Coil acceleration at this sample and at the RK stages up to the next.
-        for j in range(2 * n_sub + 1):
-            part = j / (2.0 * n_sub)
-            coil[j] = _coil(
-                _ramp(a_from, a_to, in_level + part, ramp), theta + omega * dt * part, distortion
-            )
-        a_base = _derivatives(
-            indices,
-            coefficients,
-            shapes,
-            modal,
-            microslip,
-            joint_kinds,
-            joint_parameters,
-            slider_stiffness,
-            slip_forces,
-            mode2,
-            shaker,
-            anchors,
-            slider_forces,
-            dk,
-            x,
-            v,
-            q,
-            w,
-            vb,
-            coil[0],
-        )[4]
+        coil[0] = _coil(amplitude, theta, distortion)
+        d1 = _derivatives(structure, anchors, slider_forces, dk, x, v, q, w, vb, coil[0])
+        a_base = d1[4]
         if not (abs(x) <= x_max and np.isfinite(v) and np.isfinite(a_base)):
             return n
 
@@ -449,15 +333,13 @@ def _lab_kernel(
             base = sensors[_BASE_DROPOUT, n]
         response = centre - base
         s, c = np.sin(theta), np.cos(theta)
-        products = (response * s, response * c, base * s, base * c)
-        for k in range(4 if base_reference else 2):
-            previous = products[k]
-            for stage in range(order):
-                filters[k, stage] += alpha * (previous - filters[k, stage])
-                previous = filters[k, stage]
-        phase = np.arctan2(filters[1, order - 1], filters[0, order - 1])
+        i_y = _demodulate(filters, 0, response * s, alpha)
+        q_y = _demodulate(filters, 1, response * c, alpha)
+        phase = np.arctan2(q_y, i_y)
         if base_reference:
-            phase -= np.arctan2(filters[3, order - 1], filters[2, order - 1])
+            i_r = _demodulate(filters, 2, base * s, alpha)
+            q_r = _demodulate(filters, 3, base * c, alpha)
+            phase -= np.arctan2(q_r, i_r)
         error = _wrap(phase - target)
         if in_level == ramp and level == 0:
             control_on = True
@@ -476,108 +358,37 @@ def _lab_kernel(
         out[8, n] = amplitude
         out[9, n] = np.degrees(error)
 
-        # The coil phase above used the frequency before the controller's update;
-        # the step uses the updated one, as the oscillator does.
+        # The oscillator runs at the updated frequency until the next sample.
         for j in range(1, 2 * n_sub + 1):
             part = j / (2.0 * n_sub)
             coil[j] = _coil(
                 _ramp(a_from, a_to, in_level + part, ramp), theta + omega * dt * part, distortion
             )
         for j in range(n_sub):
-            d1 = _derivatives(
-                indices,
-                coefficients,
-                shapes,
-                modal,
-                microslip,
-                joint_kinds,
-                joint_parameters,
-                slider_stiffness,
-                slip_forces,
-                mode2,
-                shaker,
-                anchors,
-                slider_forces,
-                dk,
-                x,
-                v,
-                q,
-                w,
-                vb,
-                coil[2 * j],
-            )
+            if j > 0:
+                d1 = _derivatives(
+                    structure, anchors, slider_forces, dk, x, v, q, w, vb, coil[2 * j]
+                )
+            half = 0.5 * h
             d2 = _derivatives(
-                indices,
-                coefficients,
-                shapes,
-                modal,
-                microslip,
-                joint_kinds,
-                joint_parameters,
-                slider_stiffness,
-                slip_forces,
-                mode2,
-                shaker,
-                anchors,
-                slider_forces,
-                dk,
-                x + 0.5 * h * d1[0],
-                v + 0.5 * h * d1[1],
-                q + 0.5 * h * d1[2],
-                w + 0.5 * h * d1[3],
-                vb + 0.5 * h * d1[4],
-                coil[2 * j + 1],
-            )
+                structure, anchors, slider_forces, dk, x + half * d1[0], v + half * d1[1],
+                q + half * d1[2], w + half * d1[3], vb + half * d1[4], coil[2 * j + 1],
+            )  # fmt: skip
             d3 = _derivatives(
-                indices,
-                coefficients,
-                shapes,
-                modal,
-                microslip,
-                joint_kinds,
-                joint_parameters,
-                slider_stiffness,
-                slip_forces,
-                mode2,
-                shaker,
-                anchors,
-                slider_forces,
-                dk,
-                x + 0.5 * h * d2[0],
-                v + 0.5 * h * d2[1],
-                q + 0.5 * h * d2[2],
-                w + 0.5 * h * d2[3],
-                vb + 0.5 * h * d2[4],
-                coil[2 * j + 1],
-            )
+                structure, anchors, slider_forces, dk, x + half * d2[0], v + half * d2[1],
+                q + half * d2[2], w + half * d2[3], vb + half * d2[4], coil[2 * j + 1],
+            )  # fmt: skip
             d4 = _derivatives(
-                indices,
-                coefficients,
-                shapes,
-                modal,
-                microslip,
-                joint_kinds,
-                joint_parameters,
-                slider_stiffness,
-                slip_forces,
-                mode2,
-                shaker,
-                anchors,
-                slider_forces,
-                dk,
-                x + h * d3[0],
-                v + h * d3[1],
-                q + h * d3[2],
-                w + h * d3[3],
-                vb + h * d3[4],
-                coil[2 * j + 2],
-            )
+                structure, anchors, slider_forces, dk, x + h * d3[0], v + h * d3[1],
+                q + h * d3[2], w + h * d3[3], vb + h * d3[4], coil[2 * j + 2],
+            )  # fmt: skip
             x += h / 6.0 * (d1[0] + 2.0 * d2[0] + 2.0 * d3[0] + d4[0])
             v += h / 6.0 * (d1[1] + 2.0 * d2[1] + 2.0 * d3[1] + d4[1])
             q += h / 6.0 * (d1[2] + 2.0 * d2[2] + 2.0 * d3[2] + d4[2])
             w += h / 6.0 * (d1[3] + 2.0 * d2[3] + 2.0 * d3[3] + d4[3])
             vb += h / 6.0 * (d1[4] + 2.0 * d2[4] + 2.0 * d3[4] + d4[4])
             u = x + b * q
+            microslip = structure[4]
             if microslip[0] != 0.0:
                 anchors[_F_ANCHOR] = jenkins_force(
                     u, anchors[_X_ANCHOR], anchors[_F_ANCHOR], microslip[1], microslip[2]
@@ -795,8 +606,6 @@ class LabRig(Rig):
         settings[_OMEGA_INITIAL] = omega_initial
         settings[_OMEGA_LOW] = ctrl.frequency_limits[0] * omega_initial
         settings[_OMEGA_HIGH] = ctrl.frequency_limits[1] * omega_initial
-        settings[_MU] = self.shaker.interaction
-        settings[_OMEGA_C] = 2 * math.pi * self.shaker.centring_hz
         settings[_K_DRIFT] = assembly.small_amplitude_stiffness
         settings[_DELTA0], settings[_DELTA1] = delta
         settings[_GAIN0], settings[_GAIN1] = gain
@@ -818,22 +627,18 @@ class LabRig(Rig):
         indices, coefficients, shapes = assembly.model.kernel_arrays()
         modal = np.isin(indices, [CATALOGUE[e].index for e in _MODAL_EFFECTS])
         out = np.full((len(CHANNELS), n), np.nan)
-        done = _lab_kernel(
-            indices,
-            coefficients,
-            shapes,
-            modal,
-            np.array(assembly.model.microslip_arrays()),
+        shaker = np.array([self.shaker.interaction, 2 * math.pi * self.shaker.centring_hz])
+        structure = (
+            indices, coefficients, shapes, modal, np.array(assembly.model.microslip_arrays()),
             np.array([j.kind for j in memoryless], dtype=np.int64),
             np.array([j.kernel_parameters() for j in memoryless], dtype=float).reshape(-1, 3),
-            *sliders,
-            mode2,
-            self.shaker.harmonics_table(),
-            np.asarray(self.levels_v) * assembly.shaker_gain,
-            settings,
-            np.ascontiguousarray(sensors, dtype=float),
-            out,
-        )
+            *sliders, mode2, shaker,
+        )  # fmt: skip
+        done = _lab_kernel(
+            structure, self.shaker.harmonics_table(),
+            np.asarray(self.levels_v) * assembly.shaker_gain, settings,
+            np.ascontiguousarray(sensors, dtype=float), out,
+        )  # fmt: skip
         return LabTimeSeries(self.fs, dict(zip(CHANNELS, out, strict=True)), done == n)
 
     def simulate_assembly(
