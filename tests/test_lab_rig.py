@@ -97,7 +97,7 @@ def test_linear_steady_state_is_the_closed_form_frf_on_and_off_resonance():
             0.9 * omega_n,
             1.1 * omega_n,
         )
-        assert omega == pytest.approx(expected, abs=2 * math.pi * 2e-3)
+        assert omega == pytest.approx(expected, abs=2 * math.pi * 5e-4)
     assert expected < omega_n - 2 * math.pi * 0.1  # 30° off resonance is 0.12 Hz below it
 
 
@@ -192,7 +192,7 @@ def test_piecewise_linear_backbone_is_the_exact_periodic_orbit(joint, orbit):
     for amplitude in curve.amplitude_m:
         peak = optimize.brentq(lambda p, a=amplitude: orbit(p)[1] - a, 1e-6, 5 * amplitude)
         exact.append(1 / orbit(peak)[0])
-    np.testing.assert_allclose(curve.frequency_hz, exact, rtol=1e-4)
+    np.testing.assert_allclose(curve.frequency_hz, exact, rtol=1e-5)
     if joint == PreloadedContact(0.3 * K0, 0.0):  # the bilinear oscillator's own formula
         w0, w1 = math.sqrt(K0), math.sqrt(1.3 * K0)
         np.testing.assert_allclose(curve.frequency_hz, w0 * w1 / (w0 + w1) / math.pi, rtol=1e-5)
@@ -282,7 +282,7 @@ def test_power_law_damping_matches_its_energy_per_cycle_by_quadrature():
             / w
         )
         c_eq = energy / (math.pi * a * a * w)
-        assert measured == pytest.approx((2 * zeta * 2 * math.pi * F0 + c_eq) / (2 * w), rel=0.01)
+        assert measured == pytest.approx((2 * zeta * 2 * math.pi * F0 + c_eq) / (2 * w), rel=0.005)
         # and the Γ-function describing function is that quadrature
         gamma = (
             2
@@ -317,7 +317,7 @@ def test_frequency_ripple_at_two_omega_is_what_a_first_order_low_pass_lets_throu
     w2, w_f = 2 * 2 * math.pi * F0, 2 * math.pi * 15.0
     expected = abs(kp + ki / (1j * w2)) * abs(w_f / (1j * w2 + w_f)) / (2 * math.pi)
     expected *= 2 if reference == "base" else 1
-    assert ripple == pytest.approx(expected, rel=0.05)
+    assert ripple == pytest.approx(expected, rel=0.03)
     assert controller.predicted_ripple_hz(F0, F0, ZETA) == pytest.approx(expected, rel=1e-9)
     assert ripple > 0.5  # a lab-sized ripple, not a rounding error
 
@@ -418,7 +418,7 @@ def test_second_resonance_is_where_the_modal_parameters_put_it():
         locked = 2 * math.pi * series.frequency_hz[_hold_window(rig, 0)].mean()
         guess = falls[np.argmin(np.abs(falls - 2 * math.pi * start_hz))]
         root = optimize.brentq(phase, guess - 1e-3 * w1, guess + 1e-3 * w1)
-        assert locked == pytest.approx(root, abs=2 * math.pi * 5e-3)
+        assert locked == pytest.approx(root, abs=2 * math.pi * 1e-3)
     assert abs(root - w2) < 0.01 * w2
     modes = rig.modes()
     assert modes.frequencies_hz[1] == pytest.approx(1.2 * F0)

@@ -58,7 +58,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -98,8 +98,9 @@ _GRID = (5, 3)
 ) = range(21)  # fmt: skip
 # Second-mode vector: ω₂ (0: none), ζ₂, Γ₂, centre shape, joint shape.
 _OMEGA2, _ZETA2, _GAMMA2, _CENTRE2, _JOINT2 = range(5)
-# Hysteretic anchors: Jenkins element's displacement and force, Iwan sliders' displacement.
-_X_ANCHOR, _F_ANCHOR, _U_ANCHOR = range(3)
+# Hysteretic anchors: the Jenkins element's joint displacement and force, the Iwan sliders'
+# joint displacement.
+_JENKINS_U, _JENKINS_F, _IWAN_U = range(3)
 #: Channels the kernel records, one row each.
 CHANNELS = (
     "x", "v", "q", "w", "base_velocity", "base_acceleration", "frequency_hz", "theta",
@@ -166,28 +167,31 @@ class LabAssembly:
 
 @dataclass(frozen=True, eq=False)
 class LabTimeSeries:
-    """The engine's true signals of one record (SI), one array per :data:`CHANNELS` name.
+    """The engine's true signals of one record (SI, ``fs`` samples per second).
 
-    ``x``, ``v`` first modal coordinate and velocity; ``q``, ``w`` the second
-    mode's; ``base_velocity``, ``base_acceleration`` the true base motion;
+    ``x``, ``v`` are the first modal coordinate and its velocity, ``q``, ``w`` the
+    second mode's; ``base_velocity``, ``base_acceleration`` the true base motion;
     ``frequency_hz`` and ``theta`` (rad, unwrapped) the oscillator; ``level`` the
     coil-acceleration amplitude ``A(t)`` (m/s²); ``phase_error_deg`` what the
-    controller measured. ``completed`` is False when the run diverged.
+    controller measured. ``completed`` is False when the run diverged (NaN from there).
     """
 
     fs: float
-    channels: Mapping[str, np.ndarray]
     completed: bool
-
-    def __getattr__(self, name: str) -> np.ndarray:
-        try:
-            return self.__dict__["channels"][name]
-        except KeyError:
-            raise AttributeError(name) from None
+    x: np.ndarray
+    v: np.ndarray
+    q: np.ndarray
+    w: np.ndarray
+    base_velocity: np.ndarray
+    base_acceleration: np.ndarray
+    frequency_hz: np.ndarray
+    theta: np.ndarray
+    level: np.ndarray
+    phase_error_deg: np.ndarray
 
     @property
     def t(self) -> np.ndarray:
-        return np.arange(self.channels["x"].size) / self.fs
+        return np.arange(self.x.size) / self.fs
 
 
 # --------------------------------------------------------------------------
@@ -217,13 +221,13 @@ def _forces(structure, anchors, slider_forces, x, v, u, du):
             f_joint += coefficients[i] * memoryless_force(indices[i], u, du, p0, p1)
     if microslip[0] != 0.0:
         f_joint += microslip[0] * jenkins_force(
-            u, anchors[_X_ANCHOR], anchors[_F_ANCHOR], microslip[1], microslip[2]
+            u, anchors[_JENKINS_U], anchors[_JENKINS_F], microslip[1], microslip[2]
         )
     for j in range(joint_kinds.size):
         p = joint_parameters[j]
         f_joint += memoryless_joint_force(joint_kinds[j], u, du, p[0], p[1], p[2])
     if slider_forces.size > 0:
-        f_joint += iwan_force(u, anchors[_U_ANCHOR], slider_forces, slider_stiffness, slip_forces)
+        f_joint += iwan_force(u, anchors[_IWAN_U], slider_forces, slider_stiffness, slip_forces)
     return f_modal, f_joint
 
 
@@ -390,13 +394,13 @@ def _lab_kernel(structure, distortion, levels, settings, sensors, out):
             u = x + b * q
             microslip = structure[4]
             if microslip[0] != 0.0:
-                anchors[_F_ANCHOR] = jenkins_force(
-                    u, anchors[_X_ANCHOR], anchors[_F_ANCHOR], microslip[1], microslip[2]
+                anchors[_JENKINS_F] = jenkins_force(
+                    u, anchors[_JENKINS_U], anchors[_JENKINS_F], microslip[1], microslip[2]
                 )
-                anchors[_X_ANCHOR] = u
+                anchors[_JENKINS_U] = u
             if slider_forces.size > 0:
-                iwan_update(u, anchors[_U_ANCHOR], slider_forces, slider_stiffness, slip_forces)
-                anchors[_U_ANCHOR] = u
+                iwan_update(u, anchors[_IWAN_U], slider_forces, slider_stiffness, slip_forces)
+                anchors[_IWAN_U] = u
         theta += omega * dt
     return n_total
 
@@ -639,7 +643,7 @@ class LabRig(Rig):
             np.asarray(self.levels_v) * assembly.shaker_gain, settings,
             np.ascontiguousarray(sensors, dtype=float), out,
         )  # fmt: skip
-        return LabTimeSeries(self.fs, dict(zip(CHANNELS, out, strict=True)), done == n)
+        return LabTimeSeries(self.fs, done == n, **dict(zip(CHANNELS, out, strict=True)))
 
     def simulate_assembly(
         self, assembly: LabAssembly, rng: np.random.Generator, name: str, position: float = 0.0
