@@ -1,10 +1,23 @@
 """The virtual test rig: phase-resonance records of a known ground truth.
 
 :class:`Rig` (:mod:`identification.rig.rig`) simulates and writes records in the
-TRC layout; :mod:`identification.rig.presets` holds the named scenarios.
+TRC layout with the ideal PLL simulator; :class:`LabRig`
+(:mod:`identification.rig.lab`) measures like a laboratory: shaker distortion,
+a rippling multiply-and-low-pass PLL, drift, dropouts
+(:mod:`identification.rig.conditions`) and joint physics outside the catalogue
+(:mod:`identification.rig.joints`). :mod:`identification.rig.presets` holds the
+named scenarios of both.
 """
 
-from identification.rig.presets import HIDDEN_EFFECT_SCENARIOS, RIG_PRESETS, RigPreset
+from identification.rig.lab import LabAssembly, LabRig
+from identification.rig.presets import (
+    HIDDEN_EFFECT_SCENARIOS,
+    LAB_HIDDEN_SCENARIOS,
+    LAB_NULL_SCENARIOS,
+    LAB_OUT_OF_CATALOGUE_SCENARIOS,
+    RIG_PRESETS,
+    RigPreset,
+)
 from identification.rig.rig import (
     GROUND_TRUTH_FILE,
     RecordTruth,
@@ -18,7 +31,12 @@ from identification.rig.rig import (
 __all__ = [
     "GROUND_TRUTH_FILE",
     "HIDDEN_EFFECT_SCENARIOS",
+    "LAB_HIDDEN_SCENARIOS",
+    "LAB_NULL_SCENARIOS",
+    "LAB_OUT_OF_CATALOGUE_SCENARIOS",
     "RIG_PRESETS",
+    "LabAssembly",
+    "LabRig",
     "RecordTruth",
     "Rig",
     "RigPreset",
