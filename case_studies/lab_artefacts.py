@@ -40,9 +40,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from identification.criticism.criticism import criticize, plot_comparison
-from identification.fitting.fit import fit_backbones
-from identification.measurements.backbone import extract_backbones
+from identification.criticism.criticism import criticize
+from identification.criticism.plots import plot_comparison
+from identification.fitting.least_squares import fit_backbones
+from identification.measurements.extraction import extract_backbones
 from identification.rig import RIG_PRESETS, Rig
 
 SMALL = os.environ.get("PM_JOINT_SIZE") == "small"
@@ -79,7 +80,7 @@ for name in NULL + OUT_OF_CATALOGUE:
     records = [record for record, _ in rig.campaign(assemblies=ASSEMBLIES, seed=SEED)]
     measured = extract_backbones(records)
     start = fit_backbones(RIG_PRESETS[name].base_model, measured).model
-    crit = criticize(start, measured, records=records)
+    crit = criticize(start, measured)
     criticisms[name] = crit
     proposed = crit.missing()
     first = proposed[0] if proposed else None

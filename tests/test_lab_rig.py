@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from scipy import integrate, optimize, special, stats
 
-from identification.measurements.backbone import extract_backbone
+from identification.measurements.extraction import extract_backbone
 from identification.measurements.records import Campaign
 from identification.model import JointModel
 from identification.rig import (
