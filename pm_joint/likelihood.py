@@ -32,7 +32,7 @@ from sklearn.covariance import ledoit_wolf_shrinkage
 
 from identification.measurements.backbone import BackboneSet
 from pm_joint.fitting import UNBOUNDED_CANDIDATES, DistributionFit, fit_best
-from pm_joint.ops import BACKBONE_COLUMNS
+from pm_joint.forward import BACKBONE_COLUMNS
 
 __all__ = [
     "BackboneAmplitude",

@@ -44,13 +44,13 @@ from pymc.stats.convergence import log_warnings, run_convergence_checks
 from identification.artifacts import check_sha256, versions
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
+from pm_joint.forward import BACKBONE_COLUMNS, FORWARD_KINDS, forward_model, harmonic_backbone_graph
 from pm_joint.likelihood import (
     BackboneAmplitude,
     BackboneDensity,
     amplitude_levels,
     interpolate_backbone,
 )
-from pm_joint.ops import BACKBONE_COLUMNS, FORWARD_KINDS, forward_model, harmonic_backbone_graph
 from surrogates.runtime import SurrogateRuntime
 
 __all__ = [

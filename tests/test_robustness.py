@@ -7,10 +7,10 @@ Unit-level tests elsewhere:
   ``::test_negative_damping_diverges_into_unlocked_levels``,
   ``::test_batch_marks_only_the_bad_set``, ``::test_unreachable_lock_gives_unlocked_levels``;
   the PLL Op's NaN rows and failure count:
-  ``tests/test_ops.py::test_pll_op_gives_nan_for_sets_it_cannot_run``.
+  ``tests/test_forward.py::test_pll_op_gives_nan_for_sets_it_cannot_run``.
 * Surrogate outside its box: ``tests/test_surrogates.py::test_parameters_outside_the_box``
   (``extrapolate="raise" | "flag" | "allow"``) and
-  ``tests/test_ops.py::test_surrogate_op_gives_nan_outside_its_box``.
+  ``tests/test_forward.py::test_surrogate_op_gives_nan_outside_its_box``.
 * Likelihood of a NaN prediction: ``tests/test_likelihood.py::
   test_nan_prediction_gives_minus_inf_and_is_counted``.
 
@@ -37,8 +37,8 @@ from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.records import DATA_COLUMNS, StepSchedule, read_record
 from identification.model import JointModel
 from identification.rig import Rig
+from pm_joint.forward import SurrogateOp
 from pm_joint.likelihood import BackboneAmplitude, NanCounter
-from pm_joint.ops import SurrogateOp
 from pm_joint.updating import build_model
 from surrogates.runtime import SurrogateRuntime, SurrogateSpec
 

@@ -29,8 +29,8 @@ from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.extraction import extract_backbones
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS, Rig, read_ground_truth
+from pm_joint.forward import HarmonicBalanceGraph, PLLOp, SurrogateOp
 from pm_joint.likelihood import NanCounter, amplitude_levels, level_marks
-from pm_joint.ops import HarmonicBalanceOp, PLLOp, SurrogateOp
 from pm_joint.updating import (
     build_model,
     continue_sampling,
@@ -114,7 +114,7 @@ def test_forward_models_switch_by_one_argument_and_agree(duffing_surrogate):
         )  # fmt: skip
         ops[forward] = type(pm_model.forward_op)
         predicted[forward] = _predicted_at(pm_model, point)
-    assert ops == {"harmonic": HarmonicBalanceOp, "pll": PLLOp, "surrogate": SurrogateOp}
+    assert ops == {"harmonic": HarmonicBalanceGraph, "pll": PLLOp, "surrogate": SurrogateOp}
     assert all(np.isfinite(values).all() for values in predicted.values())
     # The analytical backbones: time-domain PLL against single-harmonic balance.
     gap = np.abs(predicted["pll"] / predicted["harmonic"] - 1).max()
