@@ -14,6 +14,7 @@ import numpy as np
 
 from identification.effects import CATALOGUE
 from identification.fitting.data import HARMONIC_ORDERS, FitData
+from identification.fitting.least_squares import fit_scale
 from identification.model import JointModel
 
 #: Channel (or harmonic order) → (name in words, unit in words, factor from SI to that unit).
@@ -75,23 +76,6 @@ def _trend(values: np.ndarray) -> str:
 
 
 def _specifics(effect: str, model: JointModel, data: FitData) -> str:
-    """Fitted numbers a structural dynamicist reads directly."""
-    c = model.coefficient(effect)
-    if effect == "microslip":
-        _, k_t, f_s = model.microslip_arrays()
-        share = c * k_t / model.linear_stiffness
-        share = f"the stuck joint carries {100 * share:.2g} % of the stiffness"
-        onset = f_s / k_t
-        if onset < data.amplitude_m.min():
-            return (
-                f" (slipping over the whole test, from {1e3 * onset:.2g} mm: it acts as "
-                f"macroslip friction here; {share})"
-            )
-        return f" (slip from about {1e3 * onset:.2g} mm; {share})"
-    if effect in ("coulomb_friction", "stribeck_friction"):
-        return f" (slip force {abs(c):.3g} m/s² per unit modal mass)"
-    if effect == "cubic_stiffness":
-        return " (hardening)" if c > 0 else " (softening)"
-    if effect == "quadratic_stiffness":
-        return f" (x² coefficient {c:.3g} 1/(m·s²))"
-    return ""
+    """Fitted numbers a structural dynamicist reads directly (the effect's own words)."""
+    term = next(t for t in model.terms if t.effect == effect)
+    return CATALOGUE[effect].fitted_reading(term.coefficient, term.shape, fit_scale(model, data))

@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
-from identification.effects import CATALOGUE, get_effect
+from identification.effects import CATALOGUE, FitScale, get_effect
 from identification.fitting.data import (
     BACKBONE_CHANNELS,
     HARMONIC_CHANNELS,
@@ -49,6 +49,7 @@ __all__ = [
     "FitResult",
     "default_free",
     "default_shape_grid",
+    "fit_scale",
     "evaluate",
     "fit_backbones",
     "shape_bounds",
@@ -278,26 +279,24 @@ def _natural_coefficient(effect: str, amplitude_m: float, omega: float, stiffnes
     return stiffness * amplitude_m / peak if peak > 0 else 1.0
 
 
+def fit_scale(model: JointModel, data: FitData) -> FitScale:
+    """The test's scale, from which each effect sets its shape grids and bounds.
+
+    The stiffness is the model's small-amplitude one, or ``(2π f_median)²`` of
+    the data where the model has none.
+    """
+    frequency = data.values[:, data.column("frequency_hz")]
+    return FitScale.from_measurements(data.amplitude_m, frequency, _stiffness(model, data))
+
+
 def default_shape_grid(effect: str, data: FitData, model: JointModel) -> dict[str, np.ndarray]:
     """Shape-parameter values scanned for the start of a newly added effect.
 
-    Spans the measured amplitude (or velocity) range, so that e.g. the slip onset
-    of microslip or the Stribeck velocity can fall anywhere in the test.
+    Each effect spans the measured amplitude (or velocity) range with its own
+    grid (:meth:`identification.effects.Effect.shape_grid`), so that e.g. the
+    slip onset of microslip or the Stribeck velocity can fall anywhere in the test.
     """
-    a_lo, a_hi = data.amplitude_m.min(), data.amplitude_m.max()
-    f = data.values[:, data.column("frequency_hz")]
-    v_lo, v_hi = a_lo * 2 * np.pi * f.min(), a_hi * 2 * np.pi * f.max()
-    if effect == "microslip":
-        # The linear solve fits the coefficient, so only the slip amplitude F_s/k_t matters.
-        k_ref = 0.1 * _stiffness(model, data)
-        return {"k_t": np.array([k_ref]), "F_s": k_ref * np.geomspace(a_lo / 2, a_hi, 16)}
-    if effect == "stribeck_friction":
-        return {"v_s": np.geomspace(v_lo / 3, 10 * v_hi, 16)}
-    if effect == "tanh_saturation":
-        return {"x_s": np.geomspace(a_lo / 3, 10 * a_hi, 16)}
-    if effect == "exponential":
-        return {"x_s": np.geomspace(a_hi / 3, 30 * a_hi, 16)}
-    return {}
+    return get_effect(effect).shape_grid(fit_scale(model, data))
 
 
 def shape_bounds(name: str, data: FitData, model: JointModel) -> tuple[float, float]:
@@ -305,21 +304,14 @@ def shape_bounds(name: str, data: FitData, model: JointModel) -> tuple[float, fl
 
     A shape far outside what the test resolves lets the fit exploit numerics, not
     physics (e.g. a Stribeck velocity far below the smallest response velocity
-    makes a force spike the harmonic balance's time grid cannot resolve).
+    makes a force spike the harmonic balance's time grid cannot resolve). Each
+    effect states its own (:meth:`identification.effects.Effect.shape_bounds`);
+    a parameter it does not bound may move by e^±30.
     """
-    a_lo, a_hi = data.amplitude_m.min(), data.amplitude_m.max()
-    f = data.values[:, data.column("frequency_hz")]
-    v_lo, v_hi = a_lo * 2 * np.pi * f.min(), a_hi * 2 * np.pi * f.max()
-    k = _stiffness(model, data)
-    bounds = {
-        "stribeck_friction.v_s": (v_lo / 10, 100 * v_hi),
-        "tanh_saturation.x_s": (a_lo / 10, 100 * a_hi),
-        "exponential.x_s": (a_hi / 10, 1e3 * a_hi),
-        "microslip.k_t": (1e-4 * k, 10 * k),
-        "microslip.F_s": (1e-5 * k * a_lo, 100 * k * a_hi),
-    }
+    effect, _, shape = name.partition(".")
+    bounds = get_effect(effect).shape_bounds(fit_scale(model, data))
     value = model.parameters[name]
-    return bounds.get(name, (value * math.exp(-30), value * math.exp(30)))
+    return bounds.get(shape, (value * math.exp(-30), value * math.exp(30)))
 
 
 def _stiffness(model: JointModel, data: FitData) -> float:
