@@ -343,8 +343,9 @@ def simulate(problem: Problem, n: int, rng: np.random.Generator) -> tuple[np.nda
     draws = rng.standard_normal((n, curves, p)) @ np.linalg.cholesky(per_curve).T
     mean = draws.mean(axis=1) + rng.standard_normal((n, p)) * np.sqrt(covariance.floor)
     extra = np.asarray(covariance.extra)
-    if extra.ndim == 2:
-        mean += rng.standard_normal((n, p)) @ np.linalg.cholesky(extra).T
+    if extra.ndim == 2:  # low rank (a posterior of a few parameters): a square root by eigh
+        values, vectors = np.linalg.eigh(extra)
+        mean += rng.standard_normal((n, p)) @ (vectors * np.sqrt(np.clip(values, 0, None))).T
     estimated, _, _ = cov.estimate(draws, problem.channel_of, problem.positions,
                                    problem.variance_floor)  # fmt: skip
     of_mean = estimated / curves + np.diag(covariance.floor) + extra
@@ -362,8 +363,8 @@ def calibrate(
     """Thresholds of the decision by parametric bootstrap under the refitted base model."""
     if not 0 < alpha < 0.5:
         raise ValueError(f"alpha must be in (0, 0.5), got {alpha}")
-    if n_bootstrap < 10 / alpha:
-        raise ValueError(f"n_bootstrap must be ≥ 10/alpha = {10 / alpha:.0f}, got {n_bootstrap}")
+    if n_bootstrap < 5 / alpha:  # fewer than 5 exceedances: the quantile is a guess
+        raise ValueError(f"n_bootstrap must be ≥ 5/alpha = {5 / alpha:.0f}, got {n_bootstrap}")
     start = time.perf_counter()
     rng = np.random.default_rng(seed)
     parts = []

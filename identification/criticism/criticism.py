@@ -107,8 +107,8 @@ EXPLAINED = 0.8
 PARTLY = 0.5
 #: Separation statistic (χ²₁, 1 %) below which the data cannot tell two candidates apart.
 SEPARATION = 6.63
-#: A channel is made worse beyond its noise when its χ² rises by more than this (χ²₁, 1 %)
-#: and ends beyond its calibrated bound.
+#: A channel is made worse beyond its noise when its χ² ends beyond its calibrated bound and
+#: rises by more than this (χ²₁, 1 %) and by more than its value before (it doubles).
 WORSE = 6.63
 #: Candidates refitted (nonlinear) at most, best linearised gains first.
 MAX_REFITS = 8
@@ -716,8 +716,13 @@ class Criticism:
         signature = {c: ext[:, j] - without[:, j] for j, c in enumerate(channels)}
         before, after = self._channel_chi2(base), self._channel_chi2(fit)
         bounds = self.calibration.channel_bounds
+        # Worse beyond the noise: pushed beyond the calibrated scatter by more than χ²₁'s 1 %
+        # quantile, and by more than the misfit it had (a channel already far off may move
+        # while a second missing effect is still unexplained; doubling is not a trade-off).
         worse = tuple(
-            g for g in after if after[g] - before[g] > WORSE and after[g] > bounds.get(g, np.inf)
+            g
+            for g in after
+            if after[g] > bounds.get(g, np.inf) and after[g] - before[g] > max(WORSE, before[g])
         )
         beyond = tuple(g for g in after if after[g] > bounds.get(g, np.inf))
         f, z = self.data.column("frequency_hz"), self.data.column("damping_ratio")

@@ -165,6 +165,8 @@ def candidate_directions(
         columns.append(change)
         sign = 1 if spec.coefficient_sign > 0 else 0
         directions += [Direction(effect, s, sign) for s in shapes]
+    if not columns:  # no candidates: the decision rests on the free-form reference
+        return np.zeros((metric.keep.sum(), 0)), directions
     return np.hstack(columns), directions
 
 

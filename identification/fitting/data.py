@@ -132,7 +132,8 @@ def _branch_values(
     """``(n_curves, n_branches, n_levels, n_columns)`` each branch interpolated to the levels.
 
     Linear in log-amplitude inside the branch's range, points at equal amplitude
-    averaged; NaN where a branch does not reach a level or lacks the column.
+    averaged; NaN where a branch does not reach a level or lacks the column, and at
+    levels next to a NaN point (a model without a periodic solution there) only.
     """
     n_branches = max(len(r) for r in runs)
     out = np.full((len(runs), n_branches, levels.size, per_point.shape[1]), np.nan)
@@ -146,8 +147,6 @@ def _branch_values(
             inside = (levels >= unique[0] * (1 - 1e-12)) & (levels <= unique[-1] * (1 + 1e-12))
             for j in range(per_point.shape[1]):
                 column = per_point[rows, j]
-                if not np.isfinite(column).all():
-                    continue
                 mean = np.bincount(inverse, weights=column) / counts
                 out[i, b, inside, j] = np.interp(log_levels[inside], np.log(unique), mean)
     return out
