@@ -142,6 +142,7 @@ def run_demo(out: str | Path = "demo_out", size: str = "full", workers: int | No
     )
 
     labels = stages.run("per-record labels", pipeline.label_records, workspace)
+    workspace.release_records()  # about 1 GB at full size; no later stage reads them from here
     runtime = stages.run(
         "surrogate", pipeline.train_surrogate_stage, workspace, out / "surrogate",
         labels=labels, n_curves=cfg.surrogate_curves, max_epochs=cfg.surrogate_epochs, seed=0,

@@ -98,17 +98,20 @@ def report(
         The measured backbones the model was updated with.
     density
         The likelihood's density; default: the one stored with the posterior
-        (:func:`pm_joint.save_posterior`), else (a posterior written before
-        densities were stored, or never saved) one fitted to ``measured`` with
+        (:func:`pm_joint.sample` keeps it for a :func:`pm_joint.build_model`
+        model, :func:`pm_joint.save_posterior` writes it), else (a posterior
+        written before densities were stored) one fitted to ``measured`` with
         the defaults of :func:`pm_joint.build_model`, with a warning; either is
         checked against the trace's observed data, so other levels raise rather
         than mislead.
     var_names
-        Parameters to report; default :func:`default_var_names`.
+        Parameters to report; default
+        :func:`~pm_joint.analysis.summaries.default_var_names`.
     out
         The report folder (created if missing).
     sampler
-        Sampler name, where the trace does not tell (see :func:`sampler_info`).
+        Sampler name, where the trace does not tell (see
+        :func:`~pm_joint.analysis.summaries.sampler_info`).
 
     Returns
     -------
@@ -123,8 +126,8 @@ def report(
     density = density or stored_density(idata)
     if density is None:
         warnings.warn(
-            "no likelihood density is stored with this posterior (it was written before "
-            "pm-joint stored it, or never saved): refitting one at the default amplitude levels",
+            "no likelihood density is stored with this posterior (written before pm-joint "
+            "stored it, or not from build_model): refitting one at the default amplitude levels",
             UserWarning,
             stacklevel=2,
         )
