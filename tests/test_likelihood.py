@@ -1,3 +1,4 @@
+import json
 import warnings
 
 import numpy as np
@@ -10,7 +11,7 @@ from scipy import stats
 from identification.analytical import harmonic
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
-from pm_joint.likelihood import (
+from pm_joint.distributions import (
     BackboneAmplitude,
     BackboneDensity,
     NanCounter,
@@ -55,6 +56,21 @@ def test_pytensor_graph_equals_numpy_density(measured, family):
     np.testing.assert_allclose([f(r) for r in rows], density.logpdf(rows), rtol=0, atol=1e-6)
 
 
+@pytest.mark.parametrize("family", ["copula", "mvn"])
+def test_a_density_written_as_json_reads_back_as_the_same_density(measured, family):
+    levels = amplitude_levels(measured, n_levels=6, inset=0.1)
+    density = BackboneDensity.fit(
+        measured, levels, channels=("frequency_hz", "damping_ratio"), family=family
+    )
+    again = BackboneDensity.from_dict(json.loads(json.dumps(density.to_dict())))
+    assert (again.family, again.channels) == (family, density.channels)
+    assert [m.family for m in again.marginals] == [m.family for m in density.marginals]
+    np.testing.assert_array_equal(again.amplitudes_m, levels)
+    np.testing.assert_array_equal(again.observations, density.observations)
+    rows = np.vstack([density.observations[:3], density.sample(3, rng=4)])
+    np.testing.assert_array_equal(again.logpdf(rows), density.logpdf(rows))  # not a refit
+
+
 def test_gaussian_copula_with_normal_marginals_is_a_multivariate_normal(measured):
     density = BackboneDensity.fit(measured, candidates=("norm",))
     sigma = np.array([m.params[1] for m in density.marginals])
@@ -87,7 +103,7 @@ def _duffing_backbone_graph(k_scale, k3, amplitudes):
 
 
 def test_model_logp_is_the_density_at_the_prediction(measured):
-    levels = amplitude_levels(measured, n=7)
+    levels = amplitude_levels(measured, n_levels=7)
     density = BackboneDensity.fit(measured, levels)
     with pm.Model() as model:
         k_scale = pm.Uniform("k_scale", 0.95, 1.05)
@@ -109,12 +125,12 @@ def test_model_logp_is_the_density_at_the_prediction(measured):
 
 def test_metropolis_posterior_predictive_matches_the_measured_population(measured):
     """The paper's scheme: posterior predictive backbones look like the measured ones."""
-    levels = amplitude_levels(measured, n=5)
+    levels = amplitude_levels(measured, n_levels=5)
     with pm.Model():
         k_scale = pm.Uniform("k_scale", 0.95, 1.05)
         k3 = pm.Uniform("k3", 0.0, 3e10)
         backbone = _duffing_backbone_graph(k_scale, k3, AMPS)
-        BackboneAmplitude("backbone", backbone, observed=measured, levels=levels)
+        BackboneAmplitude("backbone", backbone, observed=measured, amplitudes_m=levels)
         idata = pm.sample(
             draws=1500, tune=500, chains=1, step=pm.Metropolis(), random_seed=1,
             progressbar=False, compute_convergence_checks=False,

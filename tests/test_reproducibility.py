@@ -21,7 +21,7 @@ from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
 from identification.rig import Rig
 from identification.sindy import identify
-from pm_joint.updating import build_model, sample
+from pm_joint.inference import build_model, sample
 from surrogates.nets import NetConfig
 from surrogates.runtime import SurrogateSpec
 from surrogates.train import TrainingConfig, train_surrogate

@@ -14,10 +14,10 @@ Unit-level tests elsewhere:
 * Likelihood of a NaN prediction: ``tests/test_likelihood.py::
   test_nan_prediction_gives_minus_inf_and_is_counted``.
 
-Here the same failures go through :func:`pm_joint.updating.build_model`: the
+Here the same failures go through :func:`pm_joint.build_model`: the
 model's log density at a parameter vector where the forward model fails is
 -inf (a sampler rejects the proposal and goes on), the likelihood's
-:class:`~pm_joint.likelihood.NanCounter` and the forward Op count it, and the
+:class:`~pm_joint.distributions.NanCounter` and the forward Op count it, and the
 log density at a good vector stays finite. The rig refuses to write a record
 of a model that diverges. A long record is read block by block, with progress.
 """
@@ -37,9 +37,9 @@ from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.records import DATA_COLUMNS, StepSchedule, read_record
 from identification.model import JointModel
 from identification.rig import Rig
+from pm_joint.distributions import BackboneAmplitude, NanCounter
 from pm_joint.forward import SurrogateOp
-from pm_joint.likelihood import BackboneAmplitude, NanCounter
-from pm_joint.updating import build_model
+from pm_joint.inference import build_model
 from surrogates.runtime import SurrogateRuntime, SurrogateSpec
 
 sys.path.insert(0, str(Path(__file__).parent))
