@@ -1037,7 +1037,7 @@ class Criticism:
         """A few lines in words: the decision, where the model fails, what it lacks."""
         cal_ = self.calibration
         obs = self.observed
-        lines = [f"model: {self.base.model.equation()}"]
+        lines = [f"model: {self.base.model.equation()}", f"data: {self._data_words()}"]
         if self.posterior is None and self.fit.model.equation() != self.base.model.equation():
             lines.append(f"(coefficients refitted; as given: χ² {self._chi2(self.fit):.4g} → "
                          f"{self._chi2(self.base):.4g})")  # fmt: skip
@@ -1064,6 +1064,11 @@ class Criticism:
             lines.append(f"fails: {text}")
         lines.append(f"verdict: {self.verdict_text}")
         proposed = self.missing()
+        lines.append(
+            f"counts: {len(self.candidate_effects)} catalogue effects tried, "
+            f"{sum(c.fit is not None for c in self.candidates)} refitted, {len(proposed)} "
+            f"proposed, {len(self.groups)} ambiguity group{'s' if len(self.groups) != 1 else ''}"
+        )
         if not proposed:
             lines.append("missing: nothing proposed")
         for c in proposed[:3]:
@@ -1080,6 +1085,20 @@ class Criticism:
         if self.significant:
             lines.append(f"free-form reference: {self._shape_words()}")
         return "\n".join(lines)
+
+    def _data_words(self) -> str:
+        """What the likelihood used: curves, levels, channels, the covariance's kind."""
+        data, covariance = self.data, self.metric.covariance
+        mm = 1e3 * data.levels_m
+        used = [c for c, u in zip(data.channels, data.used, strict=True) if u]
+        text = (
+            f"{data.n_curves} curve{'s' if data.n_curves != 1 else ''}, {mm.size} levels "
+            f"{mm[0]:.2g}–{mm[-1]:.2g} mm, channels {', '.join(used)}; {covariance.kind} "
+            "covariance"
+        )
+        if covariance.kind == "between-curve":
+            text += f" (correlation shrinkage {covariance.correlation_shrinkage:.2f})"
+        return text
 
     def _no_solution_texts(self) -> list[str]:
         where = no_solution(self.data.levels_m, mean_prediction(self.data, self.base.predicted))
@@ -1126,6 +1145,7 @@ class Criticism:
             "explained_share": self.explained_share,
             "ranking": [_ranking_entry(c) for c in self.missing()],
             "groups": [g.to_dict() for g in self.groups],
+            "summary": self.summary(),
         }
 
     @property
