@@ -149,9 +149,10 @@ def test_loglik_is_that_of_the_mean_curve_with_its_covariance():
     result = evaluate(linear(), data, free=["linear_stiffness", "viscous_damping"])
     # the curves share their amplitudes: the levels are those amplitudes
     np.testing.assert_allclose(data.levels_m, AMPS, rtol=1e-12)
-    by_hand = np.mean(
-        [np.column_stack([c.frequency_hz, c.damping_ratio]) for c in measured], axis=0
-    ) - result.predicted[: AMPS.size]
+    by_hand = (
+        np.mean([np.column_stack([c.frequency_hz, c.damping_ratio]) for c in measured], axis=0)
+        - result.predicted[: AMPS.size]
+    )
     covariance = data.covariance.mean
     expected = stats.multivariate_normal(np.zeros(by_hand.size), covariance).logpdf(
         by_hand.reshape(-1)
