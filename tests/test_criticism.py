@@ -14,7 +14,11 @@ from identification.criticism.criticism import criticize
 from identification.criticism.plots import plot_history
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
-from identification.rig import HIDDEN_EFFECT_SCENARIOS
+from identification.rig import (
+    HIDDEN_EFFECT_SCENARIOS,
+    LAB_NULL_SCENARIOS,
+    LAB_OUT_OF_CATALOGUE_SCENARIOS,
+)
 from pm_joint.analysis.posterior import criticize as criticize_posterior
 from pm_joint.studies import KEY_CHANNEL, criticism_study
 
@@ -141,6 +145,26 @@ def test_damping_effects_are_found_and_read(effect, coefficient, words):
         assert stribeck.fit.damping_rmse < 0.1 * crit.base.damping_rmse
         with pytest.raises(ValueError, match="no shape parameter"):
             crit.add("stribeck_friction", x_s=1.0)
+
+
+def test_effects_the_data_cannot_separate_form_a_group():
+    """Stribeck's law with its decay velocity far above every velocity of the test is
+    Coulomb's: both explain Coulomb data equally, so they form a group (a ranking inside
+    it is not a finding) and the report says that nothing near this test separates them;
+    ẋ² is not in it (it cancels the viscous term: inadmissible)."""
+    data = population(linear(coulomb_friction=0.2), noise_zeta=2e-6, seed=1)
+    candidates = ["coulomb_friction", "stribeck_friction", "quadratic_damping"]
+    crit = criticize(linear(), data, n_bootstrap=500, candidates=candidates)
+    assert crit.verdict == "explained"
+    (group,) = crit.groups
+    assert set(group.effects) == {"coulomb_friction", "stribeck_friction"}
+    assert max(group.separation.values()) < 6.63  # χ²₁ at 1 %: no evidence between them
+    assert group.separated_by.startswith("nothing near this test")
+    assert "a ranking among them is not a finding" in crit.summary()
+    assert "1 ambiguity group" in crit.summary()
+    quadratic = next(c for c in crit.candidates if c.effect == "quadratic_damping")
+    assert not quadratic.proposed and quadratic.problems
+    assert "terms cancel in the equivalent damping" in quadratic.problems[0]
 
 
 def test_add_refuses_what_it_cannot_add(duffing_data):
@@ -317,3 +341,52 @@ def test_quadratic_stiffness_needs_the_records():
 def test_hidden_effect_study_over_seeds(scenario, seed):
     result = study(scenario, seed)
     assert result.passed, result.row()
+
+
+# --------------------------------------------------------------------------
+# Lab scenarios (identification.rig.rig_for_preset): artefacts are not physics
+
+
+def test_lab_drift_is_drift_not_physics():
+    """Natural frequency +0.2 % within each run, levels stepped up then down: the branches
+    differ by time, so the verdict is drift, with its rate per hold near the preset's
+    0.2 %·f₀ over the run's 2·8 − 1 holds, and nothing is proposed as physics."""
+    result = study("lab-drift")
+    crit = result.criticisms[0]
+    assert crit.verdict == "drift" and not crit.missing(), crit.summary()
+    (frequency,) = [d for d in crit.drift if d.channel == "frequency_hz" and d.significant]
+    f0 = np.sqrt(result.truth.coefficient("linear_stiffness")) / (2 * np.pi)
+    assert frequency.rate == pytest.approx(0.002 * f0 / 15, rel=0.2)
+    assert "drift, not joint physics" in crit.summary()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize(
+    "scenario",
+    [
+        pytest.param(
+            s,
+            marks=pytest.mark.xfail(
+                reason="seed 0 measured: the free-form reference fires on the 2nd harmonic at "
+                "the lowest level (0.58 % of the fundamental): the excitation's harmonics are "
+                "not yet forcing the model (crit-measure's branch)"
+            ),
+        )
+        if s in ("lab-all", "lab-all-hardening")
+        else s
+        for s in LAB_NULL_SCENARIOS
+    ],
+)
+def test_lab_null_scenarios_find_nothing(scenario, seed):
+    result = study(scenario, seed)
+    assert result.passed and not result.false_discovery, result.row()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", LAB_OUT_OF_CATALOGUE_SCENARIOS)
+def test_out_of_catalogue_physics_is_not_explained_as_physics(scenario):
+    result = study(scenario)
+    crit = result.criticisms[0]
+    assert crit.verdict in ("not explained by the catalogue", "partly explained"), crit.summary()
+    assert all(not c.problems for c in crit.missing())
