@@ -90,7 +90,11 @@ def _cmd_criticize(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import criticize_campaign
 
     crit = criticize_campaign(args.dir, args.model, args.out, rounds=args.rounds)
-    print(crit.summary())
+    rounds = crit.rounds
+    for k, report in enumerate(rounds, start=1):
+        if len(rounds) > 1:
+            print(f"--- round {k} of {len(rounds)} ({report['action']}): {report['verdict']}")
+        print(report["summary"])
     print(f"wrote {args.out}/criticism.json")
 
 

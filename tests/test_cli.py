@@ -149,7 +149,7 @@ def test_hand_made_records_give_the_known_backbones_and_model(hand_made, tmp_pat
     assert json.loads((crit / "criticism.json").read_text())["significant"] is False
 
 
-def test_rig_campaign_through_every_stage(rig_campaign, tmp_path):
+def test_rig_campaign_through_every_stage(rig_campaign, tmp_path, capsys):
     assert main(["backbones", str(rig_campaign)]) == 0
     assert (rig_campaign / "backbones.csv").exists()
 
@@ -175,9 +175,20 @@ def test_rig_campaign_through_every_stage(rig_campaign, tmp_path):
     assert resumed.sizes == {"chain": 1, "draw": 600}
 
     crit = tmp_path / "criticism"
-    assert main(["criticize", str(rig_campaign), "--model", str(model), "--out", str(crit)]) == 0
-    ranking = json.loads((crit / "criticism.json").read_text())["ranking"]
-    assert ranking and ranking[0]["effect"] == "microslip"  # the rig's hidden joint physics
+    capsys.readouterr()
+    argv = ["criticize", str(rig_campaign), "--model", str(model), "--out", str(crit)]
+    assert main([*argv, "--rounds", "1"]) == 0
+    report = json.loads((crit / "criticism.json").read_text())
+    first = report["rounds"][0]
+    assert first["ranking"] and first["ranking"][0]["effect"] == "microslip"  # hidden physics
+    # every round's calibrated verdict is printed, with what the decision rests on
+    printed = capsys.readouterr().out
+    assert printed.count("--- round ") == len(report["rounds"]) == 2
+    assert f"--- round 1 of 2 (start): {first['verdict']}" in printed
+    assert "--- round 2 of 2 (+ microslip)" in printed
+    assert printed.count("verdict: ") == 2 and printed.count("counts: ") == 2
+    assert f"{report['n_bootstrap']} bootstrap campaigns" in printed
+    assert "data: 3 curves" in printed
 
     out = tmp_path / "report"
     argv = ["report", str(rig_campaign / "backbones.csv"), "--posterior", str(posterior)]

@@ -52,7 +52,8 @@ def test_duffing_population_is_recovered():
     assert result.model.coefficient("viscous_damping") == pytest.approx(2 * 0.003 * W0, rel=0.01)
     # The mean residual (assembly offsets average out) is at the noise level.
     assert result.frequency_rmse_hz < 0.01 and result.damping_rmse < 2e-6
-    assert result.n_parameters == 3 and result.n_residuals == 2 * 3 * AMPS.size
+    # the likelihood counts the mean curve: levels × channels, not points
+    assert result.n_parameters == 3 and result.n_residuals == 2 * AMPS.size
 
 
 def test_linearised_start_is_exact_for_single_harmonic_data():
@@ -138,39 +139,59 @@ def test_per_curve_fits_label_each_curve():
         assert r.model.coefficient("cubic_stiffness") == pytest.approx(1e10 * s, rel=1e-6)
 
 
-def test_loglik_and_information_criteria_are_gaussian():
+def test_loglik_is_that_of_the_mean_curve_with_its_covariance():
+    """The log-likelihood is the Gaussian density of the mean residual over curves at the
+    levels, with the covariance of that mean (not of independent points); AIC and BIC
+    count the fitted parameters; a channel weighted 0 leaves the likelihood."""
     models = [linear(s).with_effect("cubic_stiffness", 1e10) for s in (0.996, 1.004, 1.0)]
     measured = curves(models, noise_hz=0.01, noise_zeta=1e-5, seed=3)
     data = fit_data(measured)
     result = evaluate(linear(), data, free=["linear_stiffness", "viscous_damping"])
-    expected = stats.norm.logpdf(data.values, result.predicted, data.sigma).sum()
-    assert result.loglik == pytest.approx(expected, rel=1e-12)
-    n = data.values.size
+    # the curves share their amplitudes: the levels are those amplitudes
+    np.testing.assert_allclose(data.levels_m, AMPS, rtol=1e-12)
+    by_hand = (
+        np.mean([np.column_stack([c.frequency_hz, c.damping_ratio]) for c in measured], axis=0)
+        - result.predicted[: AMPS.size]
+    )
+    covariance = data.covariance.mean
+    expected = stats.multivariate_normal(np.zeros(by_hand.size), covariance).logpdf(
+        by_hand.reshape(-1)
+    )
+    assert result.loglik == pytest.approx(expected, rel=1e-10)
+    n = by_hand.size
+    assert result.n_residuals == n
     assert result.bic == pytest.approx(2 * np.log(n) - 2 * expected)
     assert result.aic == pytest.approx(4 - 2 * expected)
-    # Frequency alone: half the residuals.
+    # Frequency alone: half the entries, and its own covariance block.
     alone = evaluate(linear(), data, weights={"damping_ratio": 0.0})
     assert alone.n_residuals == n // 2
 
 
-def test_scatter_at_levels_is_the_spread_across_curves():
-    """Curves measured at the same amplitudes: the level σ is their standard deviation
-    at each amplitude combined with the floor."""
+def test_covariance_of_the_mean_is_the_scatter_over_the_curve_count_plus_the_floors():
+    """Three curves: the standard error of the mean curve is the between-curve scatter over
+    √3 combined with the systematic floors; the scatter's variances lie within the
+    curves' sample variances (shrunk toward the channel's median), the covariance does
+    not depend on the model."""
     models = [linear(s, zeta=z) for s, z in ((0.99, 0.003), (1.0, 0.0031), (1.01, 0.0029))]
     measured = curves(models, method="single")
     data = fit_data(measured)
-    np.testing.assert_allclose(data.levels_m, AMPS, rtol=1e-12)
-    spread_f = np.std([c.frequency_hz for c in measured], axis=0, ddof=1)
-    spread_z = np.std([c.damping_ratio for c in measured], axis=0, ddof=1)
-    np.testing.assert_allclose(
-        data.level_sigma[:, 0], np.hypot(spread_f, NOISE_FLOOR["frequency_hz"]), rtol=1e-9
-    )
-    np.testing.assert_allclose(
-        data.level_sigma[:, 1], np.hypot(spread_z, NOISE_FLOOR["damping_ratio"]), rtol=1e-9
-    )
     mean, se = data.level_mean(data.values)
     np.testing.assert_allclose(mean[:, 0], np.mean([c.frequency_hz for c in measured], axis=0))
-    np.testing.assert_allclose(se, data.level_sigma / np.sqrt(3))
+    covariance = data.covariance
+    floors = np.tile([NOISE_FLOOR["frequency_hz"] ** 2, NOISE_FLOOR["damping_ratio"] ** 2],
+                     AMPS.size)  # fmt: skip
+    np.testing.assert_allclose(covariance.floor, floors)
+    per_curve = np.diag(covariance.per_curve).reshape(AMPS.size, 2)
+    np.testing.assert_allclose(se**2, per_curve / 3 + floors.reshape(AMPS.size, 2), rtol=1e-12)
+    for j, values in enumerate(([c.frequency_hz for c in measured],
+                                [c.damping_ratio for c in measured])):  # fmt: skip
+        sample = np.var(values, axis=0, ddof=1)
+        assert sample.min() * (1 - 1e-9) <= per_curve[:, j].min()
+        assert per_curve[:, j].max() <= sample.max() * (1 + 1e-9)
+    np.linalg.cholesky(covariance.mean)  # positive definite although 3 curves ≪ 16 entries
+    before = data.whitened(evaluate(linear(), data).predicted)
+    after = data.whitened(evaluate(linear(1.01), data).predicted)
+    assert not np.allclose(before, after)  # one metric, two models
 
 
 def test_bad_input_is_named():
