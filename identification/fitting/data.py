@@ -12,6 +12,10 @@ Each value's standard deviation combines the measured scatter across curves at
 its amplitude (assembly-to-assembly variability), a stated noise floor
 (:data:`NOISE_FLOOR`) and, for the harmonics, the hold fit's standard error, so
 a population-mean model is judged against the spread the test itself shows.
+
+Each point also keeps the harmonics of the base acceleration its hold measured,
+the forcing the model's prediction at that point is driven by
+(:func:`identification.fitting.prediction.predict_channels`).
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from identification.measurements.backbone import BackboneSet
+from identification.measurements.backbone import Backbone, BackboneSet
 
 __all__ = [
     "BACKBONE_CHANNELS",
@@ -113,6 +117,11 @@ class FitData:
         (the harmonics' from their hold fits), else 0.
     noise_floor
         The noise floors used (:data:`NOISE_FLOOR` keys).
+    excitation_harmonics
+        ``(n_points, n_orders)`` harmonics ``2, 3, …`` of each point's measured base
+        acceleration (fractions of its fundamental, in its own frame): the forcing
+        its prediction is driven by (0 for curves that do not carry them); None
+        where no curve does.
     """
 
     labels: tuple[str, ...]
@@ -126,6 +135,7 @@ class FitData:
 
     standard_error: np.ndarray
     noise_floor: Mapping[str, float]
+    excitation_harmonics: np.ndarray | None = None
 
     @property
     def n_points(self) -> int:
@@ -163,6 +173,7 @@ class FitData:
             self.standard_error[rows],
             self.levels_m,
             self.noise_floor,
+            None if self.excitation_harmonics is None else self.excitation_harmonics[rows],
         )
 
 
@@ -218,6 +229,9 @@ def fit_data(measured: BackboneSet, noise_floor: Mapping[str, float] | None = No
     with_harmonics = any(b.harmonics is not None for b in measured)
     channels = BACKBONE_CHANNELS + (HARMONIC_CHANNELS if with_harmonics else ())
     curve, amplitude, values, errors = [], [], [], []
+    excitation = None
+    if any(b.excitation_harmonics is not None for b in measured):
+        excitation = np.vstack([_excitation_block(b) for b in measured])
     for i, b in enumerate(measured):
         block = np.full((len(b), len(channels)), np.nan)
         se = np.zeros_like(block)
@@ -245,10 +259,22 @@ def fit_data(measured: BackboneSet, noise_floor: Mapping[str, float] | None = No
         np.vstack(errors),
         measurement_levels(measured),
         floor,
+        excitation,
     )
 
 
-def _assemble(labels, curve, amplitude, channels, values, errors, levels, floor) -> FitData:
+def _excitation_block(curve: Backbone) -> np.ndarray:
+    """The orders :data:`HARMONIC_ORDERS` of a curve's excitation harmonics (0 where absent)."""
+    block = np.zeros((len(curve), len(HARMONIC_ORDERS)), dtype=complex)
+    if curve.excitation_harmonics is not None:
+        n_orders = min(len(HARMONIC_ORDERS), curve.excitation_harmonics.shape[1])
+        block[:, :n_orders] = curve.excitation_harmonics[:, :n_orders]
+    return block
+
+
+def _assemble(
+    labels, curve, amplitude, channels, values, errors, levels, floor, excitation=None
+) -> FitData:
     """FitData with the scatter across curves at the levels and per point."""
     at_levels = _at_levels(len(labels), curve, amplitude, levels, values)
     floors = np.array([floor[_floor_key(c)] for c in channels])
@@ -263,5 +289,6 @@ def _assemble(labels, curve, amplitude, channels, values, errors, levels, floor)
     )
     sigma = np.sqrt(point_scatter**2 + floors**2 + errors**2)
     return FitData(
-        labels, curve, amplitude, channels, values, sigma, levels, level_sigma, errors, floor
-    )
+        labels, curve, amplitude, channels, values, sigma, levels, level_sigma, errors, floor,
+        excitation,
+    )  # fmt: skip
