@@ -28,8 +28,9 @@ displacement, so a point's mean offset is NaN.
 
 A point also says how it was measured: the time of its window's centre, the
 samples dropped as spikes, and whether the amplitude had settled (its relative
-change over the window within :data:`SETTLE_TOLERANCE`, or not significantly
-beyond it). Points off phase resonance (:data:`PHASE_ERROR_TOLERANCE_DEG`) or not
+change over the window within
+:data:`~identification.measurements.hold_fit.SETTLE_TOLERANCE`, or not
+significantly beyond it). Points off phase resonance (:data:`PHASE_ERROR_TOLERANCE_DEG`) or not
 settled are kept and flagged; :func:`extraction_summary` counts them.
 """
 
@@ -43,13 +44,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from identification.measurements.backbone import Backbone, BackboneSet
-from identification.measurements.hold_fit import SIGNIFICANCE, ShortHoldError, fit_hold
+from identification.measurements.hold_fit import (
+    SETTLE_TOLERANCE,
+    ShortHoldError,
+    fit_hold,
+    is_settled,
+)
 from identification.measurements.records import Hold, Record
 
 __all__ = [
     "PHASE_ERROR_TOLERANCE_DEG",
     "REFERENCE_TOLERANCE",
-    "SETTLE_TOLERANCE",
     "HoldPoint",
     "extract_backbone",
     "extract_backbones",
@@ -62,10 +67,6 @@ __all__ = [
 #: frequency noise floor of the fits) walks the channel's phase 0.04 rad off the base
 #: motion over 70 periods.
 REFERENCE_TOLERANCE = 1e-4
-#: Largest relative change of the response amplitude over a hold's window for a settled
-#: point: a response still growing by 1 % over 70 periods reads about 1 % of the damping
-#: ratio high at 0.3 % damping (the amplitude's rate over ζω).
-SETTLE_TOLERANCE = 0.01
 #: Phase errors (deg) beyond which a point is not at phase resonance: the frequency is
 #: then off the backbone by about ζ·tan(error) of itself.
 PHASE_ERROR_TOLERANCE_DEG = 5.0
@@ -75,12 +76,13 @@ PHASE_ERROR_TOLERANCE_DEG = 5.0
 class HoldPoint:
     """Backbone point of one hold phase (see the module notes for the definitions).
 
-    ``harmonics``, ``harmonic_standard_error`` and ``excitation_harmonics`` have one
-    entry per order ``2..harmonics`` of the fit (fractions of the fundamental, in
-    the convention of :class:`~identification.measurements.backbone.Backbone`).
-    ``time_s`` is the window's centre on the clock of the samples given,
-    ``amplitude_change`` the relative change of the amplitude over the window,
-    ``reference_offset_hz`` the base motion's own frequency minus the channel's.
+        ``harmonics``, ``harmonic_standard_error`` and ``excitation_harmonics`` have one
+        entry per order ``2..harmonics`` of the fit (fractions of the fundamental, in
+        the convention of :class:`~identification.measurements.backbone.Backbone`).
+        ``time_s`` is the window's centre on the clock of the samples given,
+        ``amplitude_change`` the relative change of the displacement amplitude over the
+    window,
+        ``reference_offset_hz`` the base motion's own frequency minus the channel's.
     """
 
     amplitude_m: float
@@ -149,10 +151,7 @@ def hold_point(
     # Over whole periods the sine coefficients' standard errors differ from the
     # cosine ones' by O(1 / samples).
     se_velocity = fit.response_standard_error
-    change = fit.amplitude_change
-    moving = abs(change) > SETTLE_TOLERANCE and abs(change) > (
-        SIGNIFICANCE * fit.amplitude_change_standard_error
-    )
+    change = fit.amplitude_change - fit.frequency_change  # of |V|/ω, the displacement
     return HoldPoint(
         amplitude_m=abs(relative) / omega,
         frequency_hz=fit.frequency_hz,
@@ -165,7 +164,7 @@ def hold_point(
         time_s=fit.time_s,
         dropped_samples=fit.dropped_samples,
         amplitude_change=change,
-        settled=not moving,
+        settled=is_settled(change, fit.amplitude_change_standard_error),
         reference_offset_hz=fit.reference_offset_hz,
     )
 
