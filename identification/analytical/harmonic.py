@@ -460,18 +460,12 @@ def _jenkins_loop(x, c_ms, k_t, f_s, force, anchor):
 @numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
 def _multi_harmonic_kernel(
     amplitude, omega_start, set_index, indices, coefficients, shapes, microslip,
-    orders, pure_projection, projection_sin1, basis_x, basis_v, cos1, sin1, tol, max_iter,
-    forcing, forcing_row, out_y, out_base, out_converged,
+    orders, projection, projection_sin1, basis_x, basis_v, cos1, sin1, tol, max_iter,
+    out_y, out_base, out_converged,
 ):  # fmt: skip
-    """Newton's method on the AFT residual, one independent case per (set, amplitude).
-
-    ``forcing_row[case] ≥ 0`` selects the row of ``forcing`` (the excitation's shape in
-    the residual rows, per unit of its fundamental) that the case's projection takes on
-    (see :func:`forcing_rows`); −1 is the pure sine.
-    """
+    """Newton's method on the AFT residual, one independent case per (set, amplitude)."""
     n_cases = amplitude.size
-    n_unknowns, n_time = pure_projection.shape
-    forced_projection = np.empty((n_unknowns, n_time))
+    n_unknowns, n_time = projection.shape
     for case in range(n_cases):
         out_converged[case] = False
         out_base[case] = np.nan
@@ -480,17 +474,6 @@ def _multi_harmonic_kernel(
         s = set_index[case]
         if not omega_start[case] > 0.0:
             continue
-        projection = pure_projection
-        row = forcing_row[case]
-        if row >= 0:
-            # The fundamental's amplitude A = −F_s1 scales the whole excitation, so row e
-            # balances F_e + u_e F_s1: the sin θ projection added with weight u_e.
-            for e in range(n_unknowns):
-                for n in range(n_time):
-                    forced_projection[e, n] = (
-                        pure_projection[e, n] + forcing[row, e] * projection_sin1[n]
-                    )
-            projection = forced_projection
         c_ms, k_t, f_s = microslip[s, 0], microslip[s, 1], microslip[s, 2]
         y = np.zeros(n_unknowns)
         y[1] = omega_start[case]
@@ -613,34 +596,40 @@ def _multi_harmonic(
     amplitude = np.broadcast_to(a, shape).ravel().astype(float)
     omega_start = omega_start.ravel()
     set_index = np.repeat(np.arange(table.n_sets), shape[1])
-    if forcing is None:
-        forcing = np.zeros((1, n_unknowns))
-        forcing_row = np.full(n_cases, -1)
-    else:
-        forcing = np.ascontiguousarray(forcing, dtype=float)
-        forcing_row = np.tile(np.arange(shape[1]), table.n_sets)
-    shared = (
+    coefficients = (
         table.indices, np.ascontiguousarray(table.coefficients),
         np.ascontiguousarray(table.shapes), np.ascontiguousarray(table.microslip),
-        tables["orders"], tables["projection"], tables["projection_sin1"], tables["basis_x"],
-        tables["basis_v"], tables["cos1"], tables["sin1"], float(tol), int(max_iter),
+        tables["orders"],
+    )  # fmt: skip
+    rest = (
+        tables["projection_sin1"], tables["basis_x"], tables["basis_v"], tables["cos1"],
+        tables["sin1"], float(tol), int(max_iter),
     )  # fmt: skip
 
-    def solve(part: slice) -> None:
+    def solve(part: slice, projection: np.ndarray) -> None:
         _multi_harmonic_kernel(
-            amplitude[part], omega_start[part], set_index[part], *shared,
-            forcing, forcing_row[part], y[part], base[part], converged[part],
+            amplitude[part], omega_start[part], set_index[part], *coefficients, projection,
+            *rest, y[part], base[part], converged[part],
         )  # fmt: skip
 
     n_threads = min(numba.get_num_threads(), n_cases // _CASES_PER_THREAD)
+    if forcing is None:  # interleaved: neighbouring amplitudes cost alike
+        parts = [slice(i, None, max(n_threads, 1)) for i in range(max(n_threads, 1))]
+        projections = [tables["projection"]] * len(parts)
+    else:
+        # The fundamental's amplitude A = −F_s1 scales the whole excitation, so row e
+        # balances F_e + u_e·F_s1: amplitude j's cases get the sin θ projection added to
+        # each row with the weight of its excitation.
+        parts = [slice(j, None, shape[1]) for j in range(shape[1])]
+        projections = [
+            np.ascontiguousarray(tables["projection"] + np.outer(u, tables["projection_sin1"]))
+            for u in forcing
+        ]
     if n_threads < 2:
-        solve(slice(None))
-    else:  # interleaved: neighbouring amplitudes cost alike
-        list(
-            _thread_pool(n_threads).map(
-                solve, [slice(i, None, n_threads) for i in range(n_threads)]
-            )
-        )
+        for part, projection in zip(parts, projections, strict=True):
+            solve(part, projection)
+    else:
+        list(_thread_pool(n_threads).map(solve, parts, projections))
     return y.reshape(*shape, n_unknowns), base.reshape(shape), converged.reshape(shape)
 
 
