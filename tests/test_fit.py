@@ -222,9 +222,9 @@ def test_each_point_is_driven_by_the_excitation_its_hold_measured():
     sine it is 2–5 standard errors off, the harmonic RMSE ten times larger."""
     from identification.fitting.data import HARMONIC_CHANNELS
     from identification.measurements.extraction import extract_backbones
-    from identification.rig import RIG_PRESETS, Rig
+    from identification.rig import RIG_PRESETS, rig_for_preset
 
-    rig = Rig.preset("lab-distorted", levels=5, noise_m_s=1e-5)
+    rig = rig_for_preset("lab-distorted", levels=5, noise_m_s=1e-5)
     measured = extract_backbones(record for record, _ in rig.campaign(assemblies=2, seed=0))
     data = fit_data(measured)
     assert data.excitation_harmonics.shape == (10, 2)

@@ -404,3 +404,22 @@ def test_duffing_driven_by_a_distorted_base_matches_the_independent_simulator():
     assert abs(simulated[2]) / a > 3e-4
     pure = backbone(model, [a], method="multi", harmonics=7)
     assert abs(pure.harmonics_cos_m[0, 2]) + abs(pure.harmonics_sin_m[0, 2]) < 1e-12 * a
+
+
+@pytest.mark.parametrize("kind, sign", [("base_acceleration", -1.0), ("force", 1.0)])
+def test_a_mean_in_the_excitation_is_a_static_offset_of_the_linear_response(kind, sign):
+    """A mean m·A in the excitation (a force-driven test's static preload; p = −a_base for
+    a base acceleration) displaces a linear oscillator by its static deflection p̄/k, leaves
+    the fundamental's resonance alone and adds no harmonics."""
+    zeta, a, mean = 0.01, 1e-3, 0.2
+    model = JointModel({"linear_stiffness": W0**2, "viscous_damping": 2 * zeta * W0})
+    result = backbone(model, [a], method="multi", excitation_mean=mean, excitation_kind=kind)
+    amplitude = result.base_acceleration[0]
+    assert amplitude == pytest.approx(2 * zeta * W0**2 * a, rel=1e-10)
+    assert result.harmonics_cos_m[0, 0] == pytest.approx(sign * mean * amplitude / W0**2, rel=1e-9)
+    np.testing.assert_allclose(
+        result.harmonics_cos_m[0, 2:], 0, atol=1e-11 * a
+    )  # the solver tolerance
+    np.testing.assert_allclose(
+        result.harmonics_sin_m[0, 2:], 0, atol=1e-11 * a
+    )  # the solver tolerance

@@ -76,13 +76,12 @@ PHASE_ERROR_TOLERANCE_DEG = 5.0
 class HoldPoint:
     """Backbone point of one hold phase (see the module notes for the definitions).
 
-        ``harmonics``, ``harmonic_standard_error`` and ``excitation_harmonics`` have one
-        entry per order ``2..harmonics`` of the fit (fractions of the fundamental, in
-        the convention of :class:`~identification.measurements.backbone.Backbone`).
-        ``time_s`` is the window's centre on the clock of the samples given,
-        ``amplitude_change`` the relative change of the displacement amplitude over the
-    window,
-        ``reference_offset_hz`` the base motion's own frequency minus the channel's.
+    ``harmonics``, ``harmonic_standard_error`` and ``excitation_harmonics`` have one
+    entry per order ``2..harmonics`` of the fit (fractions of the fundamental, in
+    the convention of :class:`~identification.measurements.backbone.Backbone`).
+    ``time_s`` is the window's centre on the clock of the samples given,
+    ``amplitude_change`` the relative change of the displacement amplitude over the
+    window, ``reference_offset_hz`` the base motion's own frequency minus the channel's.
     """
 
     amplitude_m: float
