@@ -372,7 +372,7 @@ def test_duffing_driven_by_a_distorted_base_matches_the_independent_simulator():
     from independent_sim import forced_steady_state
 
     zeta, k3, a = 0.02, 2e10, 1e-3
-    model = duffing(k3, viscous_damping=2 * zeta * W0)
+    model = duffing(k3, damping_ratio=zeta)
     ratios = own_frame(fourier_phasors(SHAKER))
     result = backbone(model, [a], method="multi", harmonics=7, excitation_harmonics=ratios)
     omega, amplitude = 2 * np.pi * result.frequency_hz[0], result.base_acceleration[0]
