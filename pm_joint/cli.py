@@ -55,12 +55,14 @@ def _cmd_rig(args: argparse.Namespace) -> None:
 
 
 def _cmd_backbones(args: argparse.Namespace) -> None:
+    from identification.measurements.extraction import extraction_summary
     from pm_joint.pipeline import campaign_backbones
     from pm_joint.workspace import Workspace
 
     workspace = Workspace(args.dir, backbones_csv=args.out, n_periods=args.periods)
     backbones = campaign_backbones(workspace)
     print(f"extracted {len(backbones)} backbone(s) to {workspace.backbones_csv}")
+    print(extraction_summary(backbones))
 
 
 def _cmd_identify(args: argparse.Namespace) -> None:

@@ -120,9 +120,13 @@ def test_unknown_effect_is_refused(hand_made, capsys):
     assert "unknown effect 'nope'" in capsys.readouterr().err
 
 
-def test_hand_made_records_give_the_known_backbones_and_model(hand_made, tmp_path):
+def test_hand_made_records_give_the_known_backbones_and_model(hand_made, tmp_path, capsys):
     csv = tmp_path / "backbones.csv"
     assert main(["backbones", str(hand_made), "--out", str(csv)]) == 0
+    said = capsys.readouterr().out  # how the points were measured, counted
+    assert "18 point(s) in 3 curve(s)" in said
+    assert "0 of 18 point(s) more than ±5° from phase resonance" in said
+    assert "0 of 18 point(s) not settled" in said and "0 sample(s) dropped as spikes" in said
     table = __import__("pandas").read_csv(csv)
     assert len(table) == 18
     for (_, curve), f0 in zip(table.groupby("curve"), [99.5, 100.0, 100.5], strict=True):

@@ -20,6 +20,10 @@ heteroscedastic, floored by the hold fits' standard errors), ``floor`` the state
 systematic floors (:data:`NOISE_FLOOR`). ``Σ`` does not depend on the model, so
 every model is judged in the same metric: fits minimise ``rᵀV⁻¹r``
 (:meth:`FitData.whitened`), and the criticism's tests use the same quantity.
+
+Each point also keeps the harmonics of the base acceleration its hold measured,
+the forcing the model's prediction at that point is driven by
+(:func:`identification.fitting.prediction.predict_channels`).
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ from functools import cached_property
 import numpy as np
 
 from identification.fitting import covariance as cov
-from identification.measurements.backbone import BackboneSet
+from identification.measurements.backbone import Backbone, BackboneSet
 
 __all__ = [
     "BACKBONE_CHANNELS",
@@ -218,6 +222,11 @@ class FitData:
         ``"s"`` or ``"hold"``.
     noise_floor
         The systematic floors used (:data:`NOISE_FLOOR` keys).
+    excitation_harmonics
+        ``(n_points, n_orders)`` harmonics ``2, 3, …`` of each point's measured base
+        acceleration (fractions of its fundamental, in its own frame): the forcing
+        its prediction is driven by (0 for curves that do not carry them); None
+        where no curve does.
     """
 
     labels: tuple[str, ...]
@@ -231,6 +240,7 @@ class FitData:
     time: np.ndarray
     time_unit: str
     noise_floor: Mapping[str, float]
+    excitation_harmonics: np.ndarray | None = None
     _metrics: dict = field(default_factory=dict, repr=False)
 
     # ------------------------------------------------------------ layout
@@ -395,6 +405,7 @@ class FitData:
             self.time[rows],
             self.time_unit,
             self.noise_floor,
+            None if self.excitation_harmonics is None else self.excitation_harmonics[rows],
         )
 
 
@@ -427,6 +438,9 @@ def fit_data(measured: BackboneSet, noise_floor: Mapping[str, float] | None = No
     timed = all(getattr(b, "time_s", None) is not None for b in measured)
     curve, amplitude, values, errors, times, runs = [], [], [], [], [], []
     offset = 0
+    excitation = None
+    if any(b.excitation_harmonics is not None for b in measured):
+        excitation = np.vstack([_excitation_block(b) for b in measured])
     for i, b in enumerate(measured):
         block = np.full((len(b), len(channels)), np.nan)
         se = np.zeros_like(block)
@@ -460,4 +474,15 @@ def fit_data(measured: BackboneSet, noise_floor: Mapping[str, float] | None = No
         np.concatenate(times),
         "s" if timed else "hold",
         floor,
+        excitation,
     )
+
+
+def _excitation_block(curve: Backbone) -> np.ndarray:
+    """The orders :data:`HARMONIC_ORDERS` of a curve's excitation harmonics (0 where absent)."""
+    block = np.zeros((len(curve), len(HARMONIC_ORDERS)), dtype=complex)
+    if curve.excitation_harmonics is not None:
+        n_orders = min(len(HARMONIC_ORDERS), curve.excitation_harmonics.shape[1])
+        block[:, :n_orders] = curve.excitation_harmonics[:, :n_orders]
+    return block
+

@@ -1,10 +1,10 @@
 """Backbone points from phase-resonance records: one least-squares fit per hold phase.
 
 A backbone point comes from one hold phase of a record (:mod:`identification.measurements.records`):
-the last ``N`` excitation periods are fitted with a Fourier series whose phase
-``φ(t) = 2π ∫ f(t) dt`` is the integral of the record's instantaneous-frequency
-channel, so a slowly drifting PLL frequency is followed exactly and no
-convention of the phase channel is assumed. With ``V_b`` and ``V`` the
+the last ``N`` excitation periods are fitted with a Fourier series against a reference
+phase that follows the PLL's frequency without its ripple and is cross-checked on the
+base motion's own fundamental, without the samples a vibrometer dropout spiked
+(:func:`identification.measurements.hold_fit.fit_hold`). With ``V_b`` and ``V`` the
 fundamental-harmonic complex amplitudes of the base velocity and of the
 centre-point velocity relative to the base (``v = Re(V e^{iφ})``), and
 ``ω = 2π f`` the mean frequency over the window:
@@ -25,6 +25,13 @@ displacement's ``Q_h = V_h / (ihω)`` and the base acceleration's
 real and divided by its magnitude, with the standard errors of the response's
 harmonics from the fit residual. Velocity sensors do not observe the mean
 displacement, so a point's mean offset is NaN.
+
+A point also says how it was measured: the time of its window's centre, the
+samples dropped as spikes, and whether the amplitude had settled (its relative
+change over the window within
+:data:`~identification.measurements.hold_fit.SETTLE_TOLERANCE`, or not
+significantly beyond it). Points off phase resonance (:data:`PHASE_ERROR_TOLERANCE_DEG`) or not
+settled are kept and flagged; :func:`extraction_summary` counts them.
 """
 
 from __future__ import annotations
@@ -35,28 +42,34 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.integrate import cumulative_trapezoid
 
 from identification.measurements.backbone import Backbone, BackboneSet
+from identification.measurements.hold_fit import (
+    SETTLE_TOLERANCE,
+    ShortHoldError,
+    fit_hold,
+    is_settled,
+)
 from identification.measurements.records import Hold, Record
 
 __all__ = [
+    "PHASE_ERROR_TOLERANCE_DEG",
+    "REFERENCE_TOLERANCE",
     "HoldPoint",
-    "ShortHoldError",
     "extract_backbone",
     "extract_backbones",
-    "fourier_basis",
+    "extraction_summary",
     "hold_point",
-    "hold_window",
 ]
 
-
-class ShortHoldError(ValueError):
-    """A hold phase has fewer periods than asked for."""
-
-    def __init__(self, periods: float, n_periods: int) -> None:
-        super().__init__(f"holds {periods:.1f} periods, fewer than n_periods = {n_periods}")
-        self.periods = periods
+#: Largest relative difference between the frequency channel and the base motion's own
+#: fundamental frequency that passes without a warning: 1e-4 (0.01 Hz at 100 Hz, half the
+#: frequency noise floor of the fits) walks the channel's phase 0.04 rad off the base
+#: motion over 70 periods.
+REFERENCE_TOLERANCE = 1e-4
+#: Phase errors (deg) beyond which a point is not at phase resonance: the frequency is
+#: then off the backbone by about ζ·tan(error) of itself.
+PHASE_ERROR_TOLERANCE_DEG = 5.0
 
 
 @dataclass(frozen=True)
@@ -66,6 +79,9 @@ class HoldPoint:
     ``harmonics``, ``harmonic_standard_error`` and ``excitation_harmonics`` have one
     entry per order ``2..harmonics`` of the fit (fractions of the fundamental, in
     the convention of :class:`~identification.measurements.backbone.Backbone`).
+    ``time_s`` is the window's centre on the clock of the samples given,
+    ``amplitude_change`` the relative change of the displacement amplitude over the
+    window, ``reference_offset_hz`` the base motion's own frequency minus the channel's.
     """
 
     amplitude_m: float
@@ -76,38 +92,12 @@ class HoldPoint:
     harmonics: np.ndarray
     harmonic_standard_error: np.ndarray
     excitation_harmonics: np.ndarray
+    time_s: float
+    dropped_samples: int
+    amplitude_change: float
+    settled: bool
+    reference_offset_hz: float
     mean_offset_m: float = math.nan  # velocity sensors do not observe it
-
-
-def hold_window(
-    time_s: np.ndarray, frequency_hz: np.ndarray, n_periods: int
-) -> tuple[int, np.ndarray, float]:
-    """The last ``n_periods`` periods of a hold: first sample, phase from 0, mean ω.
-
-    The phase is ``2π ∫ f dt`` of the instantaneous-frequency channel, so the
-    window spans whole periods of the excitation even while the PLL moves.
-
-    Raises
-    ------
-    ValueError
-        If the frequency channel is not positive; :class:`ShortHoldError` if the
-        hold has fewer than ``n_periods`` periods.
-    """
-    if (frequency_hz <= 0).any():
-        raise ValueError("the frequency channel is not positive")
-    phase = 2 * np.pi * cumulative_trapezoid(frequency_hz, time_s, initial=0.0)
-    periods = (phase[-1] - phase[0]) / (2 * np.pi)
-    if periods < n_periods:
-        raise ShortHoldError(periods, n_periods)
-    start = int(np.searchsorted(phase, phase[-1] - 2 * np.pi * n_periods, side="right") - 1)
-    phi = phase[start:] - phase[start]
-    return start, phi, float(phi[-1] / (time_s[-1] - time_s[start]))
-
-
-def fourier_basis(phi: np.ndarray, harmonics: int) -> np.ndarray:
-    """Columns ``[1, cos kφ…, sin kφ…]`` for ``k = 1..harmonics``."""
-    k = np.arange(1, harmonics + 1)
-    return np.column_stack([np.ones_like(phi), np.cos(np.outer(phi, k)), np.sin(np.outer(phi, k))])
 
 
 def _in_own_frame(phasors: np.ndarray) -> np.ndarray:
@@ -146,39 +136,35 @@ def hold_point(
         If the frequency channel is not positive or the hold holds fewer than
         ``n_periods`` periods.
     """
-    start, phi, omega = hold_window(time_s, frequency_hz, n_periods)
-    basis = fourier_basis(phi, harmonics)
-    signals = np.column_stack([excitation_velocity[start:], response_velocity[start:]])
-    coef = np.linalg.lstsq(basis, signals, rcond=None)[0]
-    # v = a cos kφ + b sin kφ = Re((a − ib) e^{ikφ}), per order k and signal
-    velocity = coef[1 : 1 + harmonics] - 1j * coef[1 + harmonics :]
-    base, relative = velocity[0]
+    fit = fit_hold(
+        time_s, excitation_velocity, response_velocity, frequency_hz, n_periods, harmonics
+    )
+    omega = 2 * np.pi * fit.frequency_hz
+    base, relative = fit.excitation[0], fit.response[0]
     if relative == 0 or base == 0:
         raise ValueError("no measurable response (zero fundamental)")
-    ratio = relative / base
-    phase_error = np.degrees(np.angle(ratio * 1j))  # arg(V/V_b) + 90°, wrapped
+    phase_error = np.degrees(np.angle(relative / base * 1j))  # arg(V/V_b) + 90°, wrapped
     damping = np.real(-1j * base * np.conj(relative)) / (2 * abs(relative) ** 2)
     k = np.arange(1, harmonics + 1)
-    # The response's harmonics from a solve of its own: LAPACK rounds a one-column
-    # solve differently from the two-column one above, and some candidate fits of
-    # the criticism (Stribeck, microslip, exp) move by up to 20 in ΔBIC when the
-    # harmonics move by one rounding; this keeps them bit for bit as they were.
-    response, *_ = np.linalg.lstsq(basis, response_velocity[start:], rcond=None)
-    displacement = (response[1 : 1 + harmonics] - 1j * response[1 + harmonics :]) / (1j * k * omega)
-    # Standard errors of the response's cosine coefficients from the residual; over
-    # whole periods the sine coefficients' differ by O(1 / samples).
-    dof = max(phi.size - basis.shape[1], 1)
-    variance = np.sum((response_velocity[start:] - basis @ response) ** 2) / dof
-    se_velocity = np.sqrt(variance * np.diag(np.linalg.inv(basis.T @ basis)))[1 : 1 + harmonics]
+    displacement = fit.response / (1j * k * omega)
+    # Over whole periods the sine coefficients' standard errors differ from the
+    # cosine ones' by O(1 / samples).
+    se_velocity = fit.response_standard_error
+    change = fit.amplitude_change - fit.frequency_change  # of |V|/ω, the displacement
     return HoldPoint(
         amplitude_m=abs(relative) / omega,
-        frequency_hz=omega / (2 * np.pi),
+        frequency_hz=fit.frequency_hz,
         damping_ratio=float(damping),
         phase_error_deg=float(phase_error),
-        periods=n_periods,
+        periods=fit.periods,
         harmonics=_in_own_frame(displacement),
         harmonic_standard_error=se_velocity[1:] / (k[1:] * omega * abs(displacement[0])),
-        excitation_harmonics=_in_own_frame(1j * k * omega * velocity[:, 0]),
+        excitation_harmonics=_in_own_frame(1j * k * omega * fit.excitation),
+        time_s=fit.time_s,
+        dropped_samples=fit.dropped_samples,
+        amplitude_change=change,
+        settled=is_settled(change, fit.amplitude_change_standard_error),
+        reference_offset_hz=fit.reference_offset_hz,
     )
 
 
@@ -212,6 +198,13 @@ def extract_backbone(
         has no data, a non-positive frequency channel, or a response that is not
         near phase quadrature with the excitation (|phase error| > 90°, i.e.
         negative power input: check the channel signs).
+
+    Warns
+    -----
+    UserWarning
+        One line naming the file and level of each hold whose frequency channel
+        disagrees with the base motion's own fundamental by more than
+        :data:`REFERENCE_TOLERANCE` (the base motion's is used).
     """
     for name, value in (("n_periods", n_periods), ("harmonics", harmonics)):
         if not isinstance(value, int | np.integer) or value < 1:
@@ -252,6 +245,13 @@ def extract_backbone(
                 f"{context}: response is {point.phase_error_deg:+.1f}° from phase resonance "
                 "(negative power input): check the signs of the velocity channels"
             )
+        if abs(point.reference_offset_hz) > REFERENCE_TOLERANCE * point.frequency_hz:
+            warnings.warn(
+                f"{context}: the frequency channel is {-point.reference_offset_hz:+.4g} Hz off "
+                f"the base motion's own fundamental (tolerance {REFERENCE_TOLERANCE:g} of "
+                "the frequency); the base motion's was used",
+                stacklevel=2,
+            )
         points.append(point)
         levels.append(hold.level)
     higher = harmonics > 1
@@ -267,6 +267,9 @@ def extract_backbone(
         harmonic_standard_error=[p.harmonic_standard_error for p in points] if higher else None,
         excitation_harmonics=[p.excitation_harmonics for p in points] if higher else None,
         mean_offset_m=[p.mean_offset_m for p in points],
+        time_s=[p.time_s - record.time_s[0] for p in points],
+        settled=[p.settled for p in points],
+        dropped_samples=[p.dropped_samples for p in points],
     )
 
 
@@ -286,3 +289,39 @@ def extract_backbones(
         extract_backbone(r, n_periods=n_periods, harmonics=harmonics, strict=strict)
         for r in records
     )
+
+
+def extraction_summary(
+    backbones: BackboneSet, phase_tolerance_deg: float = PHASE_ERROR_TOLERANCE_DEG
+) -> str:
+    """What the hold fits of extracted backbones flag, in one line per kind.
+
+    Counts the points off phase resonance (beyond ``phase_tolerance_deg``), the
+    points whose amplitude had not settled (:data:`SETTLE_TOLERANCE`) and the
+    samples dropped as spikes; curves that do not carry a flag (model curves,
+    tables written before the flags existed) are counted as unknown.
+    """
+    n_points = sum(len(b) for b in backbones)
+    lines = [f"{n_points} point(s) in {len(backbones)} curve(s)"]
+    phase = [b.phase_error_deg for b in backbones if b.phase_error_deg is not None]
+    if phase:
+        off = np.abs(np.concatenate(phase)) > phase_tolerance_deg
+        lines.append(
+            f"{off.sum()} of {off.size} point(s) more than ±{phase_tolerance_deg:g}° from phase "
+            "resonance (kept; their frequency is off the backbone)"
+        )
+    settled = [b.settled for b in backbones if b.settled is not None]
+    if settled:
+        moving = ~np.concatenate(settled)
+        lines.append(
+            f"{moving.sum()} of {moving.size} point(s) not settled (amplitude still moving by "
+            f"more than {100 * SETTLE_TOLERANCE:g} % over the window; kept)"
+        )
+    dropped = [b.dropped_samples for b in backbones if b.dropped_samples is not None]
+    if dropped:
+        counts = np.concatenate(dropped)
+        lines.append(
+            f"{counts.sum()} sample(s) dropped as spikes, in {np.count_nonzero(counts)} of "
+            f"{counts.size} hold(s) (at most {counts.max()} in one)"
+        )
+    return "\n".join(lines)
