@@ -485,4 +485,3 @@ def _excitation_block(curve: Backbone) -> np.ndarray:
         n_orders = min(len(HARMONIC_ORDERS), curve.excitation_harmonics.shape[1])
         block[:, :n_orders] = curve.excitation_harmonics[:, :n_orders]
     return block
-
