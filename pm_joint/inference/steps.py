@@ -75,6 +75,7 @@ class CovarianceMetropolis(pm.Metropolis):
     """
 
     name = "metropolis"
+    default_blocked = True  # one step over every variable: one compiled logp
     stats_dtypes_shapes: ClassVar = {**pm.Metropolis.stats_dtypes_shapes, "logp_inf": (bool, [])}
     _state_class = CovarianceMetropolisState
 
@@ -89,7 +90,7 @@ class CovarianceMetropolis(pm.Metropolis):
     ) -> None:
         if not (pilot_fraction > 0 and final_fraction >= 0 and pilot_fraction + final_fraction < 1):
             raise ValueError("pilot_fraction and final_fraction must leave room for adaptation")
-        super().__init__(vars, blocked=True, **kwargs)
+        super().__init__(vars, **kwargs)
         self.adapt_covariance = adapt_covariance
         self.pilot_fraction = pilot_fraction
         self.final_fraction = final_fraction
