@@ -136,7 +136,7 @@ def convergence_verdict(
                         if d not in ("chain", "draw")
                     ]
                 )
-            ),  # fmt: skip
+            ),
             "r_hat": float(np.nanmax(np.asarray(rhat[name]))),
             "ess_bulk": float(np.nanmin(np.asarray(bulk[name]))),
             "ess_tail": float(np.nanmin(np.asarray(tail[name]))),

@@ -70,7 +70,7 @@ def loo(idata: xr.DataTree, pm_model: pm.Model | None = None) -> Any:
             {
                 "/posterior": idata["posterior"].to_dataset(),
                 "/log_likelihood": xr.Dataset({"points": total}),
-            }  # fmt: skip
+            }
         )
         return az.loo(tree, var_name="points", pointwise=True)
     return az.loo(idata, var_name=channels[0], pointwise=True)
