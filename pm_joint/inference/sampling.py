@@ -24,10 +24,21 @@ from pm_joint.inference.steps import CovarianceMetropolis
 from pm_joint.inference.storage import attach_density, load_posterior
 from pm_joint.inference.traces import DrawWriter, start_trace
 
-__all__ = ["SAMPLERS", "continue_sampling", "sample"]
+__all__ = ["POPULATION_MODELS", "SAMPLERS", "SAMPLER_DEFAULTS", "continue_sampling", "sample"]
 
 #: The samplers by name.
 SAMPLERS = ("metropolis", "demetropolisz", "nuts", "nutpie")
+#: The population models of ``pm-joint update --population``.
+POPULATION_MODELS = ("matching", "hierarchical")
+#: Sampler, draws and tuning steps per chain by population model. Population matching
+#: keeps the paper's Metropolis (its covariance now learned while tuning): on the
+#: surrogate, whose gradient is a network's, it gave the best min-ESS/s of the samplers
+#: (bench/sampling.py). The hierarchical model has a parameter vector per curve
+#: (over a hundred dimensions): gradient samplers only; nutpie was the faster one.
+SAMPLER_DEFAULTS = {
+    "matching": {"sampler": "metropolis", "draws": 30_000, "tune": 3_000},
+    "hierarchical": {"sampler": "nutpie", "draws": 1_000, "tune": 1_000},
+}
 
 
 def sample(
