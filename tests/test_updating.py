@@ -28,7 +28,7 @@ from identification.analytical.pll import pll_backbones
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.extraction import extract_backbones
 from identification.model import JointModel
-from identification.rig import RIG_PRESETS, Rig, read_ground_truth
+from identification.rig import Rig, read_ground_truth
 from pm_joint.analysis import loo, population_predictive
 from pm_joint.distributions import BackboneDensity, NanCounter, amplitude_levels, level_marks
 from pm_joint.forward import HarmonicBalanceGraph, PLLOp, SurrogateOp
