@@ -204,10 +204,22 @@ def report(results: dict, surrogate: dict) -> None:
         print(f"\nharmonic balance: pm-joint's default ({default}) at {ratio:.2f}× nutpie's "
               "min-ESS/s (target ≥ 1.0×)")  # fmt: skip
     print(f"load average (1 min): {load:.2f} on {os.cpu_count()} cores (shared machine)")
+    # Flat figures for the README's table (bench/run_all.py).
+    flat = {}
+    for forward, rows in results.items():
+        for name, f in rows.items():
+            flat[f"{forward}_{name}_ess_per_s"] = f["ess_bulk_per_s"]
+        if {"metropolis", "metropolis_paper"} <= set(rows):
+            flat[f"{forward}_metropolis_vs_paper"] = (
+                rows["metropolis"]["ess_bulk_per_s"] / rows["metropolis_paper"]["ess_bulk_per_s"]
+            )
+    if "default_vs_nutpie" in summary.get("harmonic", {}):
+        flat["harmonic_default_vs_nutpie"] = summary["harmonic"]["default_vs_nutpie"]
     print(
         json.dumps(
             {
                 **surrogate,
+                **flat,
                 "parameters": NAMES,
                 "assemblies": ASSEMBLIES,
                 "chains": 2,
