@@ -70,9 +70,12 @@ def test_learned_covariance_beats_coordinatewise_proposals_on_a_correlated_norma
     for label, options in (("paper", {"adapt_covariance": False}), ("tuned", {})):
         idata = sample(pm_model, draws=3000, tune=1000, chains=2, cores=1, progressbar=False,
                        step_options=options)  # fmt: skip
-        runs[label] = float(az.ess(idata, var_names=["x"]).to_dataset()["x"].min())
+        ess = az.ess(idata, var_names=["x"]).to_dataset()["x"].values
+        runs[label] = float(ess.min())
         draws = idata.posterior["x"].values.reshape(-1, dims)
-        # Both sample the same distribution: each variance within 25 % of the truth.
-        np.testing.assert_allclose(draws.var(0), np.diag(covariance), rtol=0.25)
+        # Both sample the same distribution: each variance within 4 Monte Carlo standard
+        # errors of the truth (a normal variance estimate has relative sd √(2 / ESS)).
+        relative = draws.var(0) / np.diag(covariance) - 1
+        assert np.all(np.abs(relative) < 4 * np.sqrt(2 / ess)), (label, relative, ess)
     print(f"min bulk ESS, 2 × 3000 draws: {runs}")
     assert runs["tuned"] > 1.5 * runs["paper"]
