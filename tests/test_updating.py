@@ -437,7 +437,10 @@ def test_a_killed_run_leaves_its_draws(tmp_path):
     idata = load_posterior(folder)
     x = idata.posterior["x"].values
     assert idata.attrs["interrupted"] == 1
-    assert x.shape[:2] == (2, written - 200) and np.isfinite(x).all()
+    # The chains go on writing between the last poll and the kill: at least what was polled,
+    # in whole chunks of 100 steps (200 of them tuning).
+    assert x.shape[0] == 2 and x.shape[1] >= written - 200 and np.isfinite(x).all()
+    assert (x.shape[1] + 200) % 100 == 0
     # The draws are the standard normal's (Metropolis: about 1 effective draw in 5).
     assert abs(x.mean()) < 0.25 and 0.75 < x.std() < 1.25
     # ... and the run goes on from there to the draws it was asked for.
