@@ -145,10 +145,19 @@ def _cmd_report(args: argparse.Namespace) -> None:
     print(f"wrote {index}")
 
 
-def _cmd_demo(args: argparse.Namespace) -> None:
+def _cmd_demo(args: argparse.Namespace) -> int:
     from pm_joint.demo import run_demo
 
-    run_demo(out=args.out, size=args.size)
+    result = run_demo(out=args.out, size=args.size)
+    if not result.converged:
+        lines = "\n".join(f"  {line}" for line in result.not_converged())
+        print(
+            f"pm-joint demo: NOT CONVERGED: the report in {args.out} holds posteriors that are "
+            f"not a result yet (exit code {EXIT_NOT_CONVERGED}):\n{lines}",
+            file=sys.stderr,
+        )
+        return EXIT_NOT_CONVERGED
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -232,14 +241,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="posterior netCDF file")
     p.add_argument(
         "--sampler", choices=SAMPLERS,
-        help="default: metropolis (matching), nutpie (hierarchical)",
+        help="default: metropolis (matching on surrogate or pll), nutpie (on harmonic)",
     )  # fmt: skip
     p.add_argument(
-        "--draws", type=int, help="draws per chain (default 30000 matching, 1000 hierarchical)"
+        "--draws",
+        type=int,
+        help="draws per chain (default 30000 metropolis, 2000 matching on harmonic, "
+        "1000 hierarchical)",
     )
-    p.add_argument(
-        "--tune", type=int, help="tuning steps (default 3000 matching, 1000 hierarchical)"
-    )
+    p.add_argument("--tune", type=int, help="tuning steps (default 3000 metropolis, 1000 nutpie)")
     p.add_argument("--chains", type=int, default=2, help="chains (default 2)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--report", help="also write the arviz report into this folder")

@@ -189,8 +189,12 @@ def criticize_campaign(
     harmonics they carry); else the campaign's workspace gives them (its
     ``backbones.csv`` when fresh, else one extraction from the records).
     ``posterior`` (a DataTree) gives the predictive bands and the medians the
-    model is compared at. Writes ``criticism.json`` and figures to ``out`` (for
-    the last round, whose history holds every step) and returns the last
+    model is compared at; from a hierarchical posterior these are the draws of
+    the population's median assembly, so the test widens by the uncertainty of
+    the population-mean curve, not by the scatter of the assemblies
+    (:func:`~pm_joint.analysis.posterior.posterior_samples`). Writes
+    ``criticism.json`` and figures to ``out`` (for the last round, whose history
+    holds every step) and returns the last
     :class:`~identification.criticism.criticism.Criticism`.
     """
     from pm_joint.analysis.posterior import criticize
@@ -324,7 +328,7 @@ def update_backbones(
         ``posterior_predictive`` group of new assemblies (population scatter
         and noise included) at 41 amplitudes over the measured range.
 
-    ``sampler``, ``draws`` and ``tune`` default per population model
+    ``sampler``, ``draws`` and ``tune`` default per population and forward model
     (:data:`~pm_joint.inference.SAMPLER_DEFAULTS`). With ``trace`` (a folder)
     the draws are written there as they are taken; with ``resume`` a run that
     stopped continues from that folder
@@ -335,7 +339,11 @@ def update_backbones(
     """
     if population not in POPULATION_MODELS:
         raise ValueError(f"population must be one of {POPULATION_MODELS}, got {population!r}")
-    defaults = SAMPLER_DEFAULTS[population]
+    if (population, forward) not in SAMPLER_DEFAULTS:
+        runs_on = ", ".join(f for p, f in SAMPLER_DEFAULTS if p == population)
+        raise ValueError(f"population model {population!r} does not run on forward model "
+                         f"{forward!r}; it runs on: {runs_on}")  # fmt: skip
+    defaults = SAMPLER_DEFAULTS[population, forward]
     sampler = sampler or defaults["sampler"]
     draws = draws or defaults["draws"]
     tune = tune or defaults["tune"]
@@ -347,9 +355,6 @@ def update_backbones(
     measured = workspace.backbones
     density = surrogate = None
     if population == "hierarchical":
-        if forward != "harmonic":
-            raise ValueError("the hierarchical model runs on the harmonic-balance graph: forward "
-                             f"must be 'harmonic', got {forward!r}")  # fmt: skip
         names = list(names or default_free(workspace.model))
         channels = tuple(channels or ("frequency_hz", "damping_ratio"))
         pm_model = hierarchical_model(

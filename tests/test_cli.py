@@ -220,7 +220,10 @@ def test_demo_runs_end_to_end_at_small_size(tmp_path):
         [sys.executable, "-m", "pm_joint.cli", "demo", "--size", "small", "--out", str(tmp_path)],
         capture_output=True, text=True, timeout=1200,
     )  # fmt: skip
-    assert done.returncode == 0, done.stderr[-3000:]
+    # Small draws need not converge: then the report is written and the exit says so.
+    assert done.returncode in (0, EXIT_NOT_CONVERGED), done.stderr[-3000:]
+    if done.returncode == EXIT_NOT_CONVERGED:
+        assert "pm-joint demo: NOT CONVERGED" in done.stderr
     index = tmp_path / "index.html"
     assert missing_links(index) == []
     page = index.read_text()

@@ -30,6 +30,7 @@ from identification.measurements.extraction import extract_backbones
 from identification.model import JointModel
 from identification.rig import Rig, read_ground_truth
 from pm_joint.analysis import loo, population_predictive
+from pm_joint.analysis.posterior import criticize, posterior_samples
 from pm_joint.distributions import BackboneDensity, NanCounter, amplitude_levels, level_marks
 from pm_joint.forward import HarmonicBalanceGraph, PLLOp, SurrogateOp
 from pm_joint.inference import (
@@ -271,6 +272,23 @@ def test_hierarchical_model_recovers_a_small_population():
     print(f"new assemblies at 1.5 mm: sd {top.std():.3f} Hz; the five curves: "
           f"{clean.frequency_hz[:, 0].std(ddof=1):.3f} Hz; noise 0.02 Hz")  # fmt: skip
     assert top.std() > 3 * 0.02
+    # The criticism is handed the population's median assembly, whose spread is the
+    # uncertainty of the population-mean curve: about 1/√5 of the assemblies' scatter.
+    names, median = posterior_samples(idata)
+    assert names == NAMES and median.shape == (200, 2)
+    assemblies = idata.posterior["theta"].values.reshape(-1, 2)
+    ratio = np.log(median[:, 1]).std() / np.log(assemblies[:, 1]).std()
+    print(f"log cubic stiffness: population median sd / assemblies' sd = {ratio:.2f}")
+    assert ratio < 0.7
+    by_mean = criticize(DUFFING, measured, posterior=idata)
+    by_scatter = criticize(DUFFING, measured, posterior=(NAMES, assemblies[::10]))
+    se_mean, se_scatter = (
+        by_mean.residual("frequency_hz")[1],
+        by_scatter.residual("frequency_hz")[1],
+    )
+    print(f"frequency standard error at 1.5 mm: {se_mean[-1]:.4f} Hz (population mean) vs "
+          f"{se_scatter[-1]:.4f} Hz (assemblies)")  # fmt: skip
+    assert se_mean[-1] < 0.8 * se_scatter[-1]
 
 
 def test_loo_refuses_population_matching():

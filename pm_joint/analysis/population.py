@@ -29,11 +29,9 @@ import xarray as xr
 from identification.analytical.harmonic import backbone
 from identification.model import JointModel
 from pm_joint.analysis.summaries import SAMPLE_DIMS, group_dataset
+from pm_joint.inference.models import POPULATION_MATCHING, POPULATION_SUFFIX
 
 __all__ = ["identifiability", "loo", "population_predictive"]
-
-#: How the two population models are named in a DataTree's ``population_model`` attribute.
-_MATCHING, _HIERARCHICAL = "population matching", "hierarchical"
 
 
 def loo(idata: xr.DataTree, pm_model: pm.Model | None = None) -> Any:
@@ -51,7 +49,7 @@ def loo(idata: xr.DataTree, pm_model: pm.Model | None = None) -> Any:
         meaning.
     """
     kind = idata.attrs.get("population_model") or getattr(pm_model, "population_model", None)
-    if kind == _MATCHING:
+    if kind == POPULATION_MATCHING:
         raise ValueError(
             "LOO refused: population matching (the paper's method) scores the model's "
             "predicted backbone under the population density fitted to the measured curves; "
@@ -195,7 +193,7 @@ def population_predictive(
         rest = [d for d in da.dims if d not in SAMPLE_DIMS]
         return da.transpose(*SAMPLE_DIMS, *rest).values.reshape(-1, *[da.sizes[d] for d in rest])
 
-    population = np.column_stack([flat(f"{n}_population") for n in names])
+    population = np.column_stack([flat(f"{n}{POPULATION_SUFFIX}") for n in names])
     spread = flat("log_spread")
     picks = np.linspace(0, len(population) - 1, min(n_draws, len(population))).astype(int)
     theta = population[picks] * np.exp(spread[picks] * rng.standard_normal(spread[picks].shape))

@@ -56,6 +56,8 @@ __all__ = [
 DEFAULT_RELATIVE_SPREAD = 0.5
 #: The two population models, as ``sample`` records them (attribute ``population_model``).
 POPULATION_MATCHING, HIERARCHICAL = "population matching", "hierarchical"
+#: Suffix of the hierarchical model's population-median parameters (``{name}_population``).
+POPULATION_SUFFIX = "_population"
 
 
 def uniform_priors(bounds: Mapping[str, tuple[float, float]]) -> pt.TensorVariable:
@@ -343,7 +345,7 @@ def hierarchical_model(
             eta = mu + sigma * z
         theta = pm.Deterministic("theta", theta0 * pt.exp(eta), dims=("curve", "parameter"))
         for j, name in enumerate(names):
-            pm.Deterministic(f"{name}_population", theta0[j] * pt.exp(mu[j]))
+            pm.Deterministic(f"{name}{POPULATION_SUFFIX}", theta0[j] * pt.exp(mu[j]))
         backbone = harmonic_backbone_graph(model, theta, names, grid)
         pm.Data("amplitude_m", amplitude, dims="point")
         pm.Data("curve_index", curve, dims="point")
