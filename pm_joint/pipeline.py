@@ -26,7 +26,7 @@ from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.records import Campaign
 from identification.model import JointModel, parameter_bounds
-from identification.rig import RIG_PRESETS, Rig
+from identification.rig import RIG_PRESETS, rig_for_preset
 from identification.sindy import (
     PAPER_LIBRARY,
     Identification,
@@ -91,7 +91,7 @@ def write_rig_campaign(
     """
     if preset not in RIG_PRESETS:
         raise ValueError(f"unknown rig preset {preset!r}; available: {', '.join(RIG_PRESETS)}")
-    rig = Rig.preset(preset, levels=n_levels)
+    rig = rig_for_preset(preset, levels=n_levels)
     workers = min(workers or os.cpu_count() or 1, assemblies * runs)
     options = {"assemblies": assemblies, "runs": runs, "seed": seed, "progress": progress}
     if workers < 2:
