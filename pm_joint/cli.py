@@ -16,6 +16,10 @@ from identification.effects import CATALOGUE
 from identification.model import PRESETS, JointModel
 from identification.rig import RIG_PRESETS
 
+# Names only: the samplers and population models are known without importing PyMC.
+SAMPLERS = ("metropolis", "demetropolisz", "nuts", "nutpie")
+POPULATION_MODELS = ("matching", "hierarchical")
+
 
 def _effect_list(text: str) -> list[str]:
     names = [n.strip() for n in text.split(",") if n.strip()]
@@ -100,24 +104,42 @@ def _cmd_criticize(args: argparse.Namespace) -> None:
     print(f"wrote {args.out}/criticism.json")
 
 
-def _cmd_update(args: argparse.Namespace) -> None:
+#: Exit code of `pm-joint update` when the posterior is written but did not converge.
+EXIT_NOT_CONVERGED = 3
+
+
+def _cmd_update(args: argparse.Namespace) -> int:
+    from pm_joint.analysis import convergence_verdict
     from pm_joint.pipeline import posterior_report, update_backbones
     from pm_joint.workspace import Workspace
 
-    if args.forward == "surrogate" and not args.surrogate:
+    forward = args.forward or ("harmonic" if args.population == "hierarchical" else "surrogate")
+    if forward == "surrogate" and not args.surrogate:
         raise ValueError("--forward surrogate needs --surrogate SURROGATE_DIR")
-    if args.forward != "surrogate" and not args.model:
-        raise ValueError(f"--forward {args.forward} needs --model model.json")
+    if forward != "surrogate" and not args.model:
+        raise ValueError(f"--forward {forward} needs --model model.json")
     workspace = Workspace(args.dir, model=args.model, surrogate=args.surrogate)
-    update_backbones(
-        workspace, args.out, forward=args.forward, sampler=args.sampler, draws=args.draws,
-        tune=args.tune, chains=args.chains, seed=args.seed,
-        trace=args.trace or Path(args.out).with_suffix(".zarr"), resume=args.resume,
+    idata = update_backbones(
+        workspace, args.out, population=args.population, forward=forward,
+        sampler=args.sampler, draws=args.draws, tune=args.tune, chains=args.chains,
+        seed=args.seed, trace=args.trace or Path(args.out).with_suffix(".zarr"),
+        resume=args.resume,
     )  # fmt: skip
     print(f"wrote {args.out}")
     if args.report:
         posterior_report(workspace, args.report)
         print(f"wrote {args.report}/report.json")
+    verdict = convergence_verdict(idata)
+    print(f"convergence: {verdict.headline()}")
+    if not verdict.converged:
+        print(
+            f"pm-joint update: NOT CONVERGED: the posterior in {args.out} is not a result yet; "
+            "continue it with --resume and more --draws (exit code "
+            f"{EXIT_NOT_CONVERGED})",
+            file=sys.stderr,
+        )
+        return EXIT_NOT_CONVERGED
+    return 0
 
 
 def _cmd_report(args: argparse.Namespace) -> None:
@@ -129,10 +151,19 @@ def _cmd_report(args: argparse.Namespace) -> None:
     print(f"wrote {index}")
 
 
-def _cmd_demo(args: argparse.Namespace) -> None:
+def _cmd_demo(args: argparse.Namespace) -> int:
     from pm_joint.demo import run_demo
 
-    run_demo(out=args.out, size=args.size)
+    result = run_demo(out=args.out, size=args.size)
+    if not result.converged:
+        lines = "\n".join(f"  {line}" for line in result.not_converged())
+        print(
+            f"pm-joint demo: NOT CONVERGED: the report in {args.out} holds posteriors that are "
+            f"not a result yet (exit code {EXIT_NOT_CONVERGED}):\n{lines}",
+            file=sys.stderr,
+        )
+        return EXIT_NOT_CONVERGED
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -195,17 +226,36 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=_cmd_criticize)
 
-    p = sub.add_parser("update", help="stochastic updating of the model on measured backbones")
+    p = sub.add_parser(
+        "update", help="stochastic updating of the model on measured backbones",
+        description="Exit codes: 0 converged, 2 bad input, 3 posterior written but NOT "
+        "converged (r̂ > 1.01, ESS < 400 or divergences).",
+    )  # fmt: skip
     p.add_argument("dir", help="campaign folder (TRC layout) or a backbones CSV")
+    p.add_argument(
+        "--population", choices=POPULATION_MODELS, default="matching",
+        help="matching: the paper's population matching (a population range); hierarchical: "
+        "per-curve parameters from an estimated population, with a likelihood of every "
+        "measured point (LOO) (default: matching)",
+    )  # fmt: skip
     p.add_argument("--model", help="model JSON file (for --forward harmonic|pll)")
-    p.add_argument("--forward", choices=("surrogate", "harmonic", "pll"), default="surrogate")
+    p.add_argument(
+        "--forward", choices=("surrogate", "harmonic", "pll"),
+        help="forward model (default: surrogate; harmonic for --population hierarchical)",
+    )  # fmt: skip
     p.add_argument("--surrogate", help="surrogate folder (for --forward surrogate)")
     p.add_argument("--out", required=True, help="posterior netCDF file")
     p.add_argument(
-        "--sampler", choices=("metropolis", "demetropolisz", "nuts"), default="metropolis"
+        "--sampler", choices=SAMPLERS,
+        help="default: metropolis (matching on surrogate or pll), nutpie (on harmonic)",
+    )  # fmt: skip
+    p.add_argument(
+        "--draws",
+        type=int,
+        help="draws per chain (default 30000 metropolis, 2000 matching on harmonic, "
+        "1000 hierarchical)",
     )
-    p.add_argument("--draws", type=int, default=30_000, help="draws per chain (default 30000)")
-    p.add_argument("--tune", type=int, default=2_000, help="tuning steps (default 2000)")
+    p.add_argument("--tune", type=int, help="tuning steps (default 3000 metropolis, 1000 nutpie)")
     p.add_argument("--chains", type=int, default=2, help="chains (default 2)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--report", help="also write the arviz report into this folder")
@@ -246,14 +296,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     warnings.formatwarning = one_line  # a warning is one line, as an error is
     try:
-        args.func(args)
+        code = args.func(args) or 0
     except (ValueError, FileNotFoundError, NotADirectoryError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"pm-joint {args.command}: error: {reason}", file=sys.stderr)
         return 2
     finally:
         warnings.formatwarning = formatwarning
-    return 0
+    return code
 
 
 if __name__ == "__main__":

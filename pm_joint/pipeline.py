@@ -35,10 +35,14 @@ from identification.sindy import (
     validate,
 )
 from pm_joint import html, plotting
+from pm_joint.analysis import convergence_verdict, identifiability, loo, population_predictive
 from pm_joint.inference import (
+    POPULATION_MODELS,
+    SAMPLER_DEFAULTS,
     amplitudes_within_surrogate,
     build_model,
     continue_sampling,
+    hierarchical_model,
     sample,
     save_posterior,
 )
@@ -185,8 +189,12 @@ def criticize_campaign(
     harmonics they carry); else the campaign's workspace gives them (its
     ``backbones.csv`` when fresh, else one extraction from the records).
     ``posterior`` (a DataTree) gives the predictive bands and the medians the
-    model is compared at. Writes ``criticism.json`` and figures to ``out`` (for
-    the last round, whose history holds every step) and returns the last
+    model is compared at; from a hierarchical posterior these are the draws of
+    the population's median assembly, so the test widens by the uncertainty of
+    the population-mean curve, not by the scatter of the assemblies
+    (:func:`~pm_joint.analysis.posterior.posterior_samples`). Writes
+    ``criticism.json`` and figures to ``out`` (for the last round, whose history
+    holds every step) and returns the last
     :class:`~identification.criticism.criticism.Criticism`.
     """
     from pm_joint.analysis.posterior import criticize
@@ -283,14 +291,15 @@ def update_backbones(
     workspace: Workspace,
     out: str | os.PathLike,
     *,
+    population: str = "matching",
     forward: str = "surrogate",
     names: Sequence[str] | None = None,
     amplitudes_m: np.ndarray | None = None,
-    channels: Sequence[str] = ("frequency_hz",),
+    channels: Sequence[str] | None = None,
     family: str = "copula",
-    sampler: str = "metropolis",
-    draws: int = 30_000,
-    tune: int = 2_000,
+    sampler: str | None = None,
+    draws: int | None = None,
+    tune: int | None = None,
     chains: int = 2,
     seed: int = 0,
     trace: str | os.PathLike | None = None,
@@ -298,30 +307,69 @@ def update_backbones(
 ) -> xr.DataTree:
     """Stochastic updating on the workspace's backbones; saves the posterior (netCDF).
 
-    The likelihood density is the workspace's (fitted once) at ``amplitudes_m``
-    (default: for a surrogate, the levels both it and the measurements cover,
-    :func:`~pm_joint.inference.amplitudes_within_surrogate`; else the default
-    grid) and is saved with the posterior, so a later report draws exactly what
-    was sampled. With ``trace`` (a zarr folder) the draws are written there as
-    they are taken; with ``resume`` a run that stopped continues from that
-    folder (:func:`~pm_joint.inference.continue_sampling`). Without it an
-    existing folder is refused rather than overwritten. The workspace's
+    ``population`` picks the population model:
+
+    ``"matching"``
+        The paper's population matching (:func:`~pm_joint.inference.build_model`):
+        the likelihood density is the workspace's (fitted once) at
+        ``amplitudes_m`` (default: for a surrogate, the levels both it and the
+        measurements cover, :func:`~pm_joint.inference.amplitudes_within_surrogate`;
+        else the default grid), saved with the posterior so a later report draws
+        exactly what was sampled. The posterior is a population range; whether
+        the forward model is one-to-one over the box is checked at the draws
+        (:func:`~pm_joint.analysis.identifiability`, attribute ``identifiability``).
+    ``"hierarchical"``
+        The hierarchical model (:func:`~pm_joint.inference.hierarchical_model`)
+        on the harmonic-balance graph: the workspace's model is the template,
+        ``names`` (default :func:`~identification.fitting.least_squares.default_free`)
+        vary from assembly to assembly, every measured point of frequency and
+        damping (``channels``) is scored. The saved posterior has its
+        ``log_likelihood`` group, its LOO (attribute ``loo``) and a
+        ``posterior_predictive`` group of new assemblies (population scatter
+        and noise included) at 41 amplitudes over the measured range.
+
+    ``sampler``, ``draws`` and ``tune`` default per population and forward model
+    (:data:`~pm_joint.inference.SAMPLER_DEFAULTS`). With ``trace`` (a folder)
+    the draws are written there as they are taken; with ``resume`` a run that
+    stopped continues from that folder
+    (:func:`~pm_joint.inference.continue_sampling`). Without it an existing
+    folder is refused rather than overwritten. The posterior carries its
+    convergence verdict (attribute ``convergence``, JSON); the workspace's
     posterior becomes the returned DataTree.
     """
+    if population not in POPULATION_MODELS:
+        raise ValueError(f"population must be one of {POPULATION_MODELS}, got {population!r}")
+    if (population, forward) not in SAMPLER_DEFAULTS:
+        runs_on = ", ".join(f for p, f in SAMPLER_DEFAULTS if p == population)
+        raise ValueError(f"population model {population!r} does not run on forward model "
+                         f"{forward!r}; it runs on: {runs_on}")  # fmt: skip
+    defaults = SAMPLER_DEFAULTS[population, forward]
+    sampler = sampler or defaults["sampler"]
+    draws = draws or defaults["draws"]
+    tune = tune or defaults["tune"]
     earlier_run = trace is not None and Path(trace).exists()
     if earlier_run and not resume:
         raise ValueError(
             f"{trace} holds the draws of an earlier run: resume it, or remove it to start again"
         )
     measured = workspace.backbones
-    surrogate = workspace.surrogate if forward == "surrogate" else None
-    if amplitudes_m is None and surrogate is not None:
-        amplitudes_m = amplitudes_within_surrogate(measured, surrogate)
-    density = workspace.density(amplitudes_m, channels=channels, family=family)
-    pm_model = build_model(
-        workspace.model, measured, forward=forward, surrogate=surrogate, names=names,
-        density=density,
-    )  # fmt: skip
+    density = surrogate = None
+    if population == "hierarchical":
+        names = list(names or default_free(workspace.model))
+        channels = tuple(channels or ("frequency_hz", "damping_ratio"))
+        pm_model = hierarchical_model(
+            workspace.model, measured, names, amplitudes_m=amplitudes_m, channels=channels
+        )
+    else:
+        channels = tuple(channels or ("frequency_hz",))
+        surrogate = workspace.surrogate if forward == "surrogate" else None
+        if amplitudes_m is None and surrogate is not None:
+            amplitudes_m = amplitudes_within_surrogate(measured, surrogate)
+        density = workspace.density(amplitudes_m, channels=channels, family=family)
+        pm_model = build_model(
+            workspace.model, measured, forward=forward, surrogate=surrogate, names=names,
+            density=density,
+        )  # fmt: skip
     if earlier_run:  # and resume
         idata = continue_sampling(pm_model, trace, draws=draws, sampler=sampler)
     else:
@@ -329,10 +377,39 @@ def update_backbones(
             pm_model, sampler=sampler, draws=draws, tune=tune, chains=chains, random_seed=seed,
             trace=trace,
         )  # fmt: skip
-    metadata = {"forward": forward, "sampler": sampler, "surrogate": str(surrogate)}
+    verdict = convergence_verdict(idata)
+    idata.attrs["convergence"] = json.dumps(verdict.to_dict())
+    if population == "hierarchical":
+        _hierarchical_extras(idata, pm_model, workspace.model, names, channels, measured)
+    else:
+        idata.attrs["identifiability"] = json.dumps(identifiability(pm_model, idata))
+    metadata = {"forward": forward, "sampler": sampler, "surrogate": str(surrogate),
+                "population_model": pm_model.population_model}  # fmt: skip
     save_posterior(idata, out, metadata=metadata, density=density)
     workspace.posterior = idata
     return idata
+
+
+def _hierarchical_extras(idata, pm_model, model, names, channels, measured) -> None:
+    """LOO (attribute ``loo``) and new assemblies (group ``posterior_predictive``)."""
+    result = loo(idata, pm_model)
+    pareto_k = np.asarray(result.pareto_k).ravel()
+    idata.attrs["loo"] = json.dumps(
+        {
+            "elpd_loo": float(result.elpd),
+            "se": float(result.se),
+            "p_loo": float(result.p),
+            "n_points": int(pareto_k.size),
+            "pareto_k_above_0.7": int(np.sum(pareto_k > 0.7)),
+        }
+    )
+    low = min(b.amplitude_range_m[0] for b in measured)
+    high = max(b.amplitude_range_m[1] for b in measured)
+    new = population_predictive(idata, model, names, np.geomspace(low, high, 41),
+                                channels=channels)  # fmt: skip
+    # arviz's layout: one chain of draws (of new assemblies, not of the chains' order).
+    idata["posterior_predictive"] = xr.DataTree(new.rename(sample="draw").expand_dims(chain=1))
+    idata.attrs["varying_parameters"] = json.dumps(list(names))
 
 
 def posterior_report(workspace: Workspace, out: str | os.PathLike) -> dict[str, Any]:

@@ -19,6 +19,7 @@ from identification.criticism.criticism import criticize as criticize_model
 from identification.effects import CATALOGUE
 from identification.measurements.backbone import BackboneSet
 from identification.model import JointModel
+from pm_joint.inference.models import POPULATION_SUFFIX
 
 __all__ = ["criticize", "posterior_samples"]
 
@@ -34,6 +35,12 @@ def posterior_samples(
     parameter name (``names``) or, without ``names``, a catalogue parameter
     (``cubic_stiffness``, ``microslip.k_t``, …). At most ``max_draws`` draws are
     kept (evenly spaced), enough for a 95 % band.
+
+    A hierarchical posterior (:func:`~pm_joint.inference.hierarchical_model`)
+    gives the draws of its population's median assembly (``{p}_population``,
+    ``θ0·exp(μ)``), named ``p``: their spread is the uncertainty of the
+    population-mean curve, not the scatter of the assemblies, which is what a
+    criticism of the population's model widens its test by.
     """
     if isinstance(posterior, tuple) and len(posterior) == 2:
         keys, draws = list(posterior[0]), np.asarray(posterior[1], dtype=float)
@@ -50,6 +57,12 @@ def posterior_samples(
                 f"got {type(posterior).__name__}"
             )
         table = {str(k): np.asarray(variables[k], dtype=float).reshape(-1) for k in variables}
+        population = {
+            k.removesuffix(POPULATION_SUFFIX): v
+            for k, v in table.items()
+            if k.endswith(POPULATION_SUFFIX)
+        }
+        table = population or table
     wanted = [k for k in table if (k in names if names is not None else _is_catalogue_parameter(k))]
     if not wanted:
         raise ValueError(

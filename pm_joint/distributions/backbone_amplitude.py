@@ -1,10 +1,12 @@
-"""The paper's backbone-amplitude likelihood as a PyMC distribution.
+"""The paper's backbone-amplitude term (population matching) for PyMC.
 
 A parameter vector is scored by the joint density of the measured backbone
 values (:class:`~pm_joint.distributions.density.BackboneDensity`) at the
 forward model's prediction interpolated to the same amplitude levels. The
-posterior then describes the population of assemblies the measurements came
-from, which is what the paper's updating is after.
+posterior then describes a population range of assemblies: the paper's
+method, valid as the population's distribution where the forward model is
+one-to-one over the prior box. It is a potential, not a likelihood of the
+measured curves (:func:`BackboneAmplitude`).
 
 :func:`logp_graph` is the density as a pytensor graph (so NUTS can
 differentiate through it); :func:`BackboneAmplitude` puts it into a PyMC model.
@@ -189,12 +191,26 @@ def BackboneAmplitude(
     family: str = "copula",
     density: BackboneDensity | None = None,
 ) -> TensorVariable:
-    """The paper's backbone-amplitude likelihood inside a ``pm.Model``.
+    """The paper's population matching inside a ``pm.Model``: a potential, not a likelihood.
+
+    The term is ``log p(prediction)``, the log density of the forward model's
+    prediction at the amplitude levels under the population density fitted to
+    the measured curves (:class:`BackboneDensity`). The measured values enter
+    only through that density: the term is not a likelihood of the measured
+    curves, so it is a ``pm.Potential`` and ``pm.compute_log_likelihood``,
+    LOO and WAIC have nothing of it to score (:func:`pm_joint.analysis.loo`
+    says so). Its posterior over θ is the set of parameter vectors whose
+    predictions look like members of the measured population: a population
+    range, valid as the population's distribution only where the forward
+    model is one-to-one over the prior box
+    (:func:`pm_joint.analysis.identifiability` checks that at the draws);
+    else the prior box shapes the marginals.
 
     Parameters
     ----------
     name
-        Name of the observed variable.
+        Name of the potential; the prediction is the deterministic
+        ``{name}_predicted`` and the measured matrix the data ``{name}_measured``.
     backbone
         Forward-model output in the common layout, (n_points, 3).
     observed
@@ -210,12 +226,9 @@ def BackboneAmplitude(
 
     Notes
     -----
-    Each row of the observed matrix (one measured curve) carries 1/n_curves of
-    ``log p(prediction)``, so the sum PyMC forms is the paper's log-likelihood
-    and the measured values are kept in the trace's ``observed_data``. Draws of
-    the variable (prior/posterior predictive) are the model's prediction at the
-    levels, to be compared with the measured population. The prediction is
-    stored as the deterministic ``{name}_predicted``.
+    Posterior draws of ``{name}_predicted`` are noise-free predictions of the
+    model at the levels: their spread is the spread of θ, to be compared with
+    the measured population.
     """
     density = density or BackboneDensity.fit(
         observed, amplitudes_m, channels=channels, family=family
@@ -225,20 +238,6 @@ def BackboneAmplitude(
         interpolate_backbone(backbone, density.amplitudes_m, density.channels)
     )
     predicted = pm.Deterministic(f"{name}_predicted", predicted)
-    n_curves = density.observations.shape[0]
-
-    def logp(value, prediction):
-        return pt.zeros(value.shape[:-1]) + logp_graph(density, prediction) / n_curves
-
-    def random(prediction, rng=None, size=None):
-        shape = (*(size or ()), prediction.shape[-1])
-        return np.broadcast_to(prediction, shape).copy()
-
-    return pm.CustomDist(
-        name,
-        predicted,
-        logp=logp,
-        random=random,
-        signature="(d)->(d)",
-        observed=density.observations,
-    )
+    # Kept with the draws (constant_data), so a report can check the density it is given.
+    pm.Data(f"{name}_measured", density.observations)
+    return pm.Potential(name, logp_graph(density, predicted))
