@@ -76,6 +76,20 @@ def posterior_samples(
     return wanted, draws[keep]
 
 
+def _posterior_kind(posterior: Any) -> str:
+    """``"mean"`` for a hierarchical posterior (its ``{p}_population`` draws are of the
+    population's median assembly), else ``"population"`` (draws spread like the assemblies,
+    as population matching gives): the criticism widens its test accordingly."""
+    if hasattr(posterior, "children") and "posterior" in posterior.children:
+        posterior = posterior["posterior"].to_dataset()
+    variables = getattr(posterior, "data_vars", posterior)
+    if isinstance(variables, Mapping) and any(
+        str(k).endswith(POPULATION_SUFFIX) for k in variables
+    ):
+        return "mean"
+    return "population"
+
+
 def _is_catalogue_parameter(name: str) -> bool:
     effect, _, shape = name.partition(".")
     return effect in CATALOGUE and (not shape or shape in CATALOGUE[effect].shape)
@@ -115,7 +129,9 @@ def criticize(
         its own draws are used.
     **options
         Passed on to :func:`identification.criticism.criticism.criticize`
-        (``records``, ``candidates``, ``history``, ``criterion``, ``threshold``, …).
+        (``records``, ``candidates``, ``history``, ``alpha``, …). ``posterior_kind``
+        defaults to ``"mean"`` for a hierarchical posterior (the draws of its population's
+        median assembly) and ``"population"`` otherwise.
 
     Returns
     -------
@@ -127,6 +143,8 @@ def criticize(
     if not isinstance(model, JointModel):
         names, values = posterior_samples(model)
         model, draws = _model_from_samples(names, values), (names, values)
+        options.setdefault("posterior_kind", _posterior_kind(model_or_posterior))
     if posterior is not None:
         draws = posterior_samples(posterior, names=model.parameter_names)
+        options.setdefault("posterior_kind", _posterior_kind(posterior))
     return criticize_model(model, measured, posterior=draws, **options)
