@@ -39,6 +39,7 @@ __all__ = [
     "LatentRegressor",
     "NetConfig",
     "PhysicalSurrogate",
+    "network_sizes",
 ]
 
 
@@ -165,10 +166,24 @@ def _float32(values: np.ndarray) -> torch.Tensor:
 class PhysicalSurrogate(nn.Module):
     """FFNN + decoder with the scalings folded in: physical parameters → physical backbones.
 
-    The input is min–max scaled with the training box, ``(p − low) / (high − low)``;
-    the decoder's output is un-scaled with ``y · scale + offset``, where ``offset``
-    and ``scale`` have shape ``(n_levels, n_channels)``. This is the graph that is
-    exported to ONNX, so the artifact needs no pre- or post-processing.
+    The input is min–max scaled with the training box, ``u = (p − low) / (high − low)``;
+    the network's output ``s(u)`` lives in the scaled space and is un-scaled with
+    ``y = s · scale + offset`` (``offset``, ``scale``: ``(n_levels, n_channels)``).
+    Two optional parts:
+
+    ``linear_head``
+        ``(weight (n_params, n_levels, n_channels), bias (n_levels, n_channels))``:
+        ``s(u) = decoder(ffnn(u)) + u · weight + bias``, so the network learns
+        the residual of a linear regression (the baseline it must beat) rather
+        than the whole curve.
+    ``probability_channels``
+        ``(n_channels,)`` booleans: those channels are logits in the scaled
+        space and leave the graph through a sigmoid, as probabilities (the
+        amplitude grid's ``has_backbone`` mask).
+
+    This is the graph that is exported to ONNX, so the artifact needs no pre- or
+    post-processing (ops: Gemm/MatMul, Elu, Relu, Reshape, Conv, Transpose and
+    elementwise arithmetic, plus Sigmoid with a probability channel).
     """
 
     def __init__(
@@ -178,6 +193,9 @@ class PhysicalSurrogate(nn.Module):
         bounds: np.ndarray,
         output_offset: np.ndarray,
         output_scale: np.ndarray,
+        *,
+        linear_head: tuple[np.ndarray, np.ndarray] | None = None,
+        probability_channels: np.ndarray | None = None,
     ) -> None:
         super().__init__()
         self.regressor, self.decoder = regressor, decoder
@@ -186,15 +204,67 @@ class PhysicalSurrogate(nn.Module):
         self.register_buffer("input_span", _float32(bounds[:, 1] - bounds[:, 0]))
         self.register_buffer("output_offset", _float32(output_offset))
         self.register_buffer("output_scale", _float32(output_scale))
+        self.has_linear_head = linear_head is not None
+        if linear_head is not None:
+            weight, bias = (np.asarray(a, dtype=np.float64) for a in linear_head)
+            self.register_buffer("linear_weight", _float32(weight.reshape(weight.shape[0], -1)))
+            self.register_buffer("linear_bias", _float32(bias))
+        self.has_probabilities = probability_channels is not None and bool(
+            np.any(probability_channels)
+        )
+        if self.has_probabilities:
+            selector = np.broadcast_to(
+                np.asarray(probability_channels, dtype=float), np.shape(output_offset)
+            )
+            self.register_buffer("probability_selector", _float32(selector))
 
     def scale_parameters(self, parameters: torch.Tensor) -> torch.Tensor:
         """Physical parameters → the unit box the FFNN was trained on."""
         return (parameters - self.input_low) / self.input_span
 
+    def linear_part(self, unit_parameters: torch.Tensor) -> torch.Tensor:
+        """The linear head's contribution in the scaled space (0 without one)."""
+        if not self.has_linear_head:
+            return torch.zeros((), device=unit_parameters.device)
+        flat = unit_parameters @ self.linear_weight
+        return flat.reshape(-1, *self.linear_bias.shape) + self.linear_bias
+
     def scaled_backbones(self, unit_parameters: torch.Tensor) -> torch.Tensor:
         """Unit-box parameters → backbones in the training (scaled) space."""
-        return self.decoder(self.regressor(unit_parameters))
+        latent_part = self.decoder(self.regressor(unit_parameters))
+        if not self.has_linear_head:
+            return latent_part
+        return latent_part + self.linear_part(unit_parameters)
 
     def forward(self, parameters: torch.Tensor) -> torch.Tensor:
         scaled = self.scaled_backbones(self.scale_parameters(parameters))
-        return scaled * self.output_scale + self.output_offset
+        physical = scaled * self.output_scale + self.output_offset
+        if not self.has_probabilities:
+            return physical
+        # Elementwise select (no gather/concat): the graph stays within simple ONNX ops.
+        return physical + self.probability_selector * (torch.sigmoid(physical) - physical)
+
+
+def network_sizes(model: PhysicalSurrogate, autoencoder: Autoencoder, config: NetConfig) -> dict:
+    """Layer widths and parameter counts of a surrogate's networks (for sidecars and benches)."""
+
+    def count(module: nn.Module) -> int:
+        return int(sum(p.numel() for p in module.parameters()))
+
+    n_levels, n_channels = model.output_offset.shape
+    n_params = model.input_low.numel()
+    return {
+        "input": [int(n_levels), int(n_channels)],
+        "latent": config.latent_dim,
+        "conv_filters": list(config.conv_filters),
+        "kernel_size": config.kernel_size,
+        "dilation": config.dilation,
+        "ffnn": [int(n_params), *[config.ffnn_width] * config.ffnn_depth, config.latent_dim],
+        "linear_head": model.has_linear_head,
+        "parameters": {
+            "encoder": count(autoencoder.encoder),
+            "decoder": count(autoencoder.decoder),
+            "ffnn": count(model.regressor),
+            "exported": count(model),
+        },
+    }

@@ -1,23 +1,37 @@
 """Training the backbone surrogate: the paper's two-stage scheme plus a joint fine-tune.
 
-1. **Autoencoder** on the scaled backbones (reconstruction MSE).
+1. **Autoencoder** on the scaled backbones (reconstruction loss).
 2. **FFNN** from the unit-box parameters to the encoder's latents (latent MSE),
    the encoder frozen.
 3. **Fine-tune** (ours, optional): FFNN + decoder end-to-end on the backbone
-   MSE, at a lower learning rate. Stage 2 only matches latents, and a small
+   loss, at a lower learning rate. Stage 2 only matches latents, and a small
    latent error can be amplified by the decoder; training the composition on
    the quantity that matters removes most of that error.
 
 Scalings: parameters are min–max scaled with the training box (the spec's
 bounds) to [0, 1]; backbones are standardised per (level, channel) by default,
-so that a 1 % error weighs the same at every excitation level, or per channel.
+so that a 1 % error weighs the same at every grid point, or per channel.
 Both are folded into :class:`~surrogates.nets.PhysicalSurrogate`, the module
 that is exported.
 
+Loss: a weighted mean over the entries of a batch, ``Σ w·ℓ / Σ w``, with ``ℓ``
+the squared error of a value channel and the binary cross-entropy of the
+amplitude grid's mask channel (a logit inside the network, a probability at its
+output). The weights (:meth:`~surrogates.dataset.BackboneDataset.loss_weights`)
+are 0 where a value is masked or was not observed, so neutral targets teach
+nothing; without weights every entry weighs 1 (plain MSE).
+
+``linear_head`` (ours, optional): a per-(level, channel) linear regression on the
+parameters, fitted to the training rows, is part of the graph and the networks
+learn its residual; the autoencoder then compresses only what the linear model
+misses.
+
 Every stage uses Adam (lr 1e-3; 1e-4 for the fine-tune; halved on plateaus),
-MSE, mini-batches of 32 (Keras' default), a validation split with early stopping
-that restores the best weights, and reports the validation Pearson coefficient per epoch (in the
-scaled space).
+mini-batches of 32 (Keras' default), a validation split with early stopping
+that restores the best weights, and reports the validation Pearson coefficient
+per epoch (in the scaled space, weighted entries of the value channels).
+:func:`train_on_dataset` takes the splits of a dataset: train, validation for
+early stopping, and an independent test split for the reported figures.
 Runs are seeded: on CPU the same seed gives the same weights; on GPU cuDNN may
 not be bitwise reproducible.
 """
@@ -27,20 +41,36 @@ from __future__ import annotations
 import copy
 import math
 import time
-from collections.abc import Callable
+import warnings
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 import torch
+from numpy.typing import ArrayLike
 from torch import nn
 from tqdm.auto import tqdm
 
-from surrogates.evaluate import backbone_metrics
-from surrogates.nets import Autoencoder, LatentRegressor, NetConfig, PhysicalSurrogate
-from surrogates.runtime import SurrogateSpec
+from surrogates.baselines import LinearBaseline
+from surrogates.dataset import MEASURED_PREFIX, BackboneDataset
+from surrogates.evaluate import accuracy_report, backbone_metrics, channel_errors
+from surrogates.nets import (
+    Autoencoder,
+    LatentRegressor,
+    NetConfig,
+    PhysicalSurrogate,
+    network_sizes,
+)
+from surrogates.runtime import MASK_CHANNEL, SurrogateSpec
 
-__all__ = ["Surrogate", "TrainingConfig", "output_scaling", "train_surrogate"]
+__all__ = [
+    "Surrogate",
+    "TrainingConfig",
+    "output_scaling",
+    "train_on_dataset",
+    "train_surrogate",
+]
 
 
 @dataclass(frozen=True)
@@ -56,6 +86,9 @@ class TrainingConfig:
     trc-like benchmark (``bench/surrogate.py``) as 3000 constant-rate epochs per
     stage with early stopping, in about a quarter of the time. ``threads`` sets
     torch's CPU threads for the training (None: leave torch's setting).
+    ``linear_head`` adds a per-(level, channel) linear regression to the graph
+    and trains the networks on its residual (see the module docstring).
+    ``validation_fraction`` applies when no validation rows are given.
     """
 
     net: NetConfig = field(default_factory=NetConfig)
@@ -69,6 +102,7 @@ class TrainingConfig:
     lr_decay_factor: float = 0.5
     validation_fraction: float = 0.2
     output_scaling: Literal["level", "channel"] = "level"
+    linear_head: bool = False
     seed: int = 0
     device: str | None = None
     threads: int | None = 1
@@ -103,7 +137,7 @@ class Surrogate:
     Attributes
     ----------
     spec
-        Parameters, box, levels and channels.
+        Parameters, box, grid and channels.
     model
         Physical parameters → physical backbones (on CPU, eval mode).
     autoencoder
@@ -114,11 +148,22 @@ class Surrogate:
         Per stage, one record per epoch: ``epoch``, ``loss``, ``val_loss``,
         ``val_pearson``, ``learning_rate``.
     metrics
-        :func:`~surrogates.evaluate.backbone_metrics` on the validation split.
+        Errors on the validation split (the one that stopped training early:
+        not an independent figure): :func:`~surrogates.evaluate.backbone_metrics`
+        on excitation levels, :func:`~surrogates.evaluate.channel_errors` on the
+        amplitude grid.
     n_train, n_validation
         Curves used to fit and to stop early.
     train_seconds
         Wall time of the whole training.
+    data
+        Where the curves came from (:func:`train_on_dataset`): the dataset's
+        hash, its counts per origin and split, and the measured curves that were
+        training or validation data (``measured_in_training``); empty when
+        trained on bare arrays.
+    test_report
+        :func:`~surrogates.evaluate.accuracy_report` on the dataset's test split
+        (:func:`train_on_dataset`), or None.
     """
 
     spec: SurrogateSpec
@@ -130,6 +175,8 @@ class Surrogate:
     n_train: int
     n_validation: int
     train_seconds: float
+    data: dict[str, Any] = field(default_factory=dict)
+    test_report: dict[str, Any] | None = None
 
     def predict(self, parameters: Any) -> np.ndarray:
         """Backbones ``(n, n_levels, n_channels)`` for physical ``(n, n_params)`` parameters."""
@@ -155,27 +202,42 @@ class Surrogate:
         """``(n_levels, n_channels)`` scale of the output scaling."""
         return self.model.output_scale.numpy().astype(np.float64)
 
+    @property
+    def sizes(self) -> dict[str, Any]:
+        """Layer widths and parameter counts (:func:`~surrogates.nets.network_sizes`)."""
+        return network_sizes(self.model, self.autoencoder, self.config.net)
+
 
 def output_scaling(
-    backbones: np.ndarray, mode: Literal["level", "channel"] = "level"
+    backbones: np.ndarray,
+    mode: Literal["level", "channel"] = "level",
+    weights: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Offset and scale, each ``(n_levels, n_channels)``, that standardise backbones.
 
     ``"level"`` standardises every (level, channel) over the curves, ``"channel"``
-    every channel over curves and levels. A spread of zero (a constant entry)
-    falls back to the channel's spread, then to 1, so the scaling stays invertible.
+    every channel over curves and levels, each over the entries with weight > 0
+    (all without ``weights``). A spread of zero (a constant entry) or an entry
+    without weighted values falls back to the channel's, then to 1, so the
+    scaling stays invertible.
     """
-    if mode == "level":
-        offset, scale = backbones.mean(axis=0), backbones.std(axis=0)
-    elif mode == "channel":
-        offset = np.broadcast_to(backbones.mean(axis=(0, 1)), backbones.shape[1:]).copy()
-        scale = np.broadcast_to(backbones.std(axis=(0, 1)), backbones.shape[1:]).copy()
-    else:
+    if mode not in ("level", "channel"):
         raise ValueError(f"output scaling must be 'level' or 'channel', got {mode!r}")
-    channel_scale = backbones.std(axis=(0, 1))
+    used = np.ones(backbones.shape, bool) if weights is None else np.asarray(weights) > 0
+    values = np.where(used, backbones, np.nan)
+    with warnings.catch_warnings():  # all-NaN slices are the fallback's business
+        warnings.simplefilter("ignore", RuntimeWarning)
+        channel_offset = np.nan_to_num(np.nanmean(values, axis=(0, 1)))
+        channel_scale = np.nanstd(values, axis=(0, 1))
+        if mode == "level":
+            offset, scale = np.nanmean(values, axis=0), np.nanstd(values, axis=0)
+        else:
+            offset = np.broadcast_to(channel_offset, backbones.shape[1:]).copy()
+            scale = np.broadcast_to(channel_scale, backbones.shape[1:]).copy()
     fallback = np.where(channel_scale > 0, channel_scale, 1.0)
     tiny = 1e-9 * fallback
-    return offset, np.where(scale > tiny, scale, fallback)
+    offset = np.where(np.isfinite(offset), offset, channel_offset)
+    return offset, np.where(np.isfinite(scale) & (scale > tiny), scale, fallback)
 
 
 def train_surrogate(
@@ -183,19 +245,30 @@ def train_surrogate(
     backbones: np.ndarray,
     spec: SurrogateSpec,
     config: TrainingConfig | None = None,
+    *,
+    weights: np.ndarray | None = None,
+    validation_index: np.ndarray | None = None,
 ) -> Surrogate:
-    """Train a backbone surrogate on a dataset of curves.
+    """Train a backbone surrogate on curves.
 
     Parameters
     ----------
     parameters
         ``(n, n_params)`` physical parameters, inside ``spec.bounds``.
     backbones
-        ``(n, n_levels, n_channels)`` backbones on ``spec.levels``, SI units.
+        ``(n, n_levels, n_channels)`` backbones on ``spec.grid``, SI units.
     spec
-        Names, box, levels and channels of the dataset.
+        Names, box, grid and channels of the data.
     config
         Training options; :class:`TrainingConfig` defaults when None.
+    weights
+        ``(n, n_levels, n_channels)`` loss weight of every entry (0: not a
+        target; :meth:`~surrogates.dataset.BackboneDataset.loss_weights`); None:
+        all 1. Masked value entries also enter the autoencoder as the neutral
+        scaled value 0.
+    validation_index
+        Rows that stop training early (never fitted); None: a seeded
+        ``config.validation_fraction`` of the rows.
 
     Returns
     -------
@@ -208,8 +281,20 @@ def train_surrogate(
     if x.shape[0] != y.shape[0]:
         raise ValueError(f"{x.shape[0]} parameter vectors but {y.shape[0]} backbones")
     spec.require_in_box(x, "training parameters", hint="; widen the spec's bounds")
-    n_validation = max(1, round(config.validation_fraction * len(x)))
-    if len(x) - n_validation < 2:
+    w = np.ones(y.shape) if weights is None else np.asarray(weights, dtype=float)
+    if w.shape != y.shape or not np.all(np.isfinite(w) & (w >= 0)):
+        raise ValueError(f"weights must be finite, ≥ 0 and shaped {y.shape}, got {w.shape}")
+    rng = np.random.default_rng(config.seed)
+    if validation_index is None:
+        n_validation = max(1, round(config.validation_fraction * len(x)))
+        order = rng.permutation(len(x))
+        valid, train = order[:n_validation], order[n_validation:]
+    else:
+        valid = np.unique(np.asarray(validation_index, dtype=int))
+        if valid.size == 0 or valid.min() < 0 or valid.max() >= len(x):
+            raise ValueError(f"validation_index must name rows of the {len(x)} curves")
+        train = rng.permutation(np.setdiff1d(np.arange(len(x)), valid))
+    if train.size < 2:
         raise ValueError(f"{len(x)} curves are too few to train and validate on")
     device = torch.device(config.device or ("cuda" if torch.cuda.is_available() else "cpu"))
     if config.threads is not None:
@@ -218,56 +303,153 @@ def train_surrogate(
         torch.set_num_threads(config.threads)
     start = time.perf_counter()
 
-    rng = np.random.default_rng(config.seed)
-    order = rng.permutation(len(x))
-    valid, train = order[:n_validation], order[n_validation:]
-    offset, scale = output_scaling(y[train], config.output_scaling)
+    probability = np.array([c == MASK_CHANNEL for c in spec.channels])
+    offset, scale = output_scaling(y[train], config.output_scaling, w[train])
+    offset[:, probability], scale[:, probability] = 0.0, 1.0  # the mask: a logit, as it is
+    neutral = np.zeros(y.shape, bool)
+    if probability.any():
+        neutral[..., ~probability] = (y[..., probability] < 0.5).any(axis=-1, keepdims=True)
+    scaled = np.where(neutral, 0.0, (y - offset) / scale)
+    unit = (x - spec.bounds[:, 0]) / np.ptp(spec.bounds, axis=1)
+    head = None
+    if config.linear_head:
+        head = _linear_head(spec, x[train], y[train], w[train], offset, scale)
 
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
         autoencoder = Autoencoder(spec.n_levels, spec.n_channels, config.net)
         regressor = LatentRegressor(spec.n_params, config.net)
-    model = PhysicalSurrogate(regressor, autoencoder.decoder, spec.bounds, offset, scale)
+    model = PhysicalSurrogate(
+        regressor, autoencoder.decoder, spec.bounds, offset, scale,
+        linear_head=head, probability_channels=probability,
+    )  # fmt: skip
     model.to(device)
     autoencoder.to(device)
 
-    unit_x = torch.as_tensor(
-        (x - spec.bounds[:, 0]) / np.ptp(spec.bounds, axis=1), dtype=torch.float32, device=device
-    )
-    scaled_y = torch.as_tensor((y - offset) / scale, dtype=torch.float32, device=device)
+    unit_x = torch.as_tensor(unit, dtype=torch.float32, device=device)
+    scaled_y = torch.as_tensor(scaled, dtype=torch.float32, device=device)
+    loss_weights = torch.as_tensor(w, dtype=torch.float32, device=device)
+    with torch.no_grad():
+        # The autoencoder compresses what the linear head leaves (all of it without one).
+        residual = torch.where(
+            torch.as_tensor(neutral, device=device), scaled_y, scaled_y - model.linear_part(unit_x)
+        )
     shuffle = torch.Generator().manual_seed(config.seed)
     stage = _StageRunner(config, shuffle, train, valid)
+    loss = _BackboneLoss(torch.as_tensor(probability, device=device))
 
     history = {
         "autoencoder": stage.run(
-            "autoencoder", autoencoder, scaled_y, scaled_y, config.learning_rate, config.max_epochs
+            "autoencoder", autoencoder, residual, residual, config.learning_rate,
+            config.max_epochs, loss=loss, weights=loss_weights,
         )
-    }
+    }  # fmt: skip
     with torch.no_grad():
         autoencoder.eval()
-        latents = autoencoder.encoder(scaled_y)
+        latents = autoencoder.encoder(residual)
     history["ffnn"] = stage.run(
         "ffnn", regressor, unit_x, latents, config.learning_rate, config.max_epochs
     )
     if config.finetune_epochs:
         history["finetune"] = stage.run(
-            "finetune",
-            model,
-            unit_x,
-            scaled_y,
-            config.finetune_learning_rate,
+            "finetune", model, unit_x, scaled_y, config.finetune_learning_rate,
             config.finetune_epochs,
-            forward=model.scaled_backbones,  # FFNN + decoder, in the scaled space
-        )
+            forward=model.scaled_backbones,  # FFNN + decoder (+ linear head), scaled space
+            loss=loss, weights=loss_weights,
+        )  # fmt: skip
 
     model.cpu().eval()
     autoencoder.cpu().eval()
     surrogate = Surrogate(
-        spec, model, autoencoder, config, history, {}, len(train), n_validation, 0.0
+        spec, model, autoencoder, config, history, {}, len(train), len(valid), 0.0
     )
-    surrogate.metrics = backbone_metrics(surrogate.predict(x[valid]), y[valid], spec)
+    predicted = surrogate.predict(x[valid])
+    surrogate.metrics = (
+        backbone_metrics(predicted, y[valid], spec)
+        if spec.representation == "excitation_levels"
+        else channel_errors(predicted, y[valid], w[valid], spec)
+    )
     surrogate.train_seconds = time.perf_counter() - start
     return surrogate
+
+
+def train_on_dataset(
+    dataset: BackboneDataset,
+    config: TrainingConfig | None = None,
+    *,
+    scatter: Mapping[str, ArrayLike] | None = None,
+) -> Surrogate:
+    """Train on a dataset's splits: fit on train, stop early on validation, report on test.
+
+    The dataset needs its splits (:meth:`~surrogates.dataset.BackboneDataset.with_splits`);
+    the loss weights are its :meth:`~surrogates.dataset.BackboneDataset.loss_weights`.
+    The returned surrogate carries :func:`~surrogates.evaluate.accuracy_report` on
+    the test split (with ``scatter``, the assembly standard deviation per grid
+    point and channel, for the ratios to it) and, in ``data``, the counts and the
+    measured curves that were training or validation data.
+    """
+    train, valid = dataset.in_split("train"), dataset.in_split("validation")
+    if dataset.in_split("test").size == 0:
+        raise ValueError("the dataset's test split is empty: no independent figure possible")
+    rows = np.concatenate([train, valid])
+    surrogate = train_surrogate(
+        dataset.X[rows], dataset.Y[rows], dataset.spec, config,
+        weights=dataset.loss_weights()[rows],
+        validation_index=np.arange(train.size, rows.size),
+    )  # fmt: skip
+    measured = dataset.is_measured
+    surrogate.data = {
+        "dataset_sha256": dataset.content_hash,
+        "counts": dataset.provenance.get("counts", {}),
+        "splits": dataset.split_counts(),
+        "measured_in_training": [
+            str(o).removeprefix(MEASURED_PREFIX) for o in dataset.origin[rows][measured[rows]]
+        ],
+        "measured_in_test": [
+            str(o).removeprefix(MEASURED_PREFIX)
+            for o in dataset.origin[measured & (dataset.partition == "test")]
+        ],
+        "measured_excluded": dataset.provenance.get("measured", {}).get("excluded", {}),
+    }
+    surrogate.test_report = accuracy_report(dataset, surrogate.predict, scatter=scatter)
+    return surrogate
+
+
+def _linear_head(
+    spec: SurrogateSpec,
+    parameters: np.ndarray,
+    backbones: np.ndarray,
+    weights: np.ndarray,
+    offset: np.ndarray,
+    scale: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The :class:`~surrogates.baselines.LinearBaseline` in the scaled space: ``(weight, bias)``.
+
+    Zero for a probability channel: the mask stays the network's alone.
+    """
+    coefficients = LinearBaseline.fit(spec, parameters, backbones, weights).coefficients
+    weight, bias = coefficients[1:] / scale, (coefficients[0] - offset) / scale
+    probability = np.array([c == MASK_CHANNEL for c in spec.channels])
+    weight[..., probability], bias[..., probability] = 0.0, 0.0
+    return weight, bias
+
+
+class _BackboneLoss:
+    """``Σ w·ℓ / Σ w``: squared error on value channels, BCE on probability channels."""
+
+    def __init__(self, probability: torch.Tensor) -> None:
+        self.probability = probability
+
+    def __call__(
+        self, predicted: torch.Tensor, target: torch.Tensor, weights: torch.Tensor
+    ) -> torch.Tensor:
+        loss = (predicted - target) ** 2
+        if self.probability.any():
+            bce = nn.functional.binary_cross_entropy_with_logits(
+                predicted, target.clamp(0.0, 1.0), reduction="none"
+            )
+            loss = torch.where(self.probability, bce, loss)
+        return (weights * loss).sum() / weights.sum().clamp_min(1e-12)
 
 
 @dataclass
@@ -288,13 +470,27 @@ class _StageRunner:
         learning_rate: float,
         max_epochs: int,
         forward: Callable[[torch.Tensor], torch.Tensor] | None = None,
+        loss: Callable[..., torch.Tensor] | None = None,
+        weights: torch.Tensor | None = None,
     ) -> list[dict[str, float]]:
-        """Train ``module``'s parameters on ``forward(inputs) ≈ targets`` (forward: the module)."""
+        """Train ``module``'s parameters on ``forward(inputs) ≈ targets`` (forward: the module).
+
+        ``loss(predicted, target, weights)`` with ``weights`` shaped like the
+        targets; default the mean squared error.
+        """
         forward = forward or module
         device = inputs.device
+        if weights is None:
+            weights = torch.ones_like(targets)
+        loss_fn = loss or (lambda p, t, w: nn.functional.mse_loss(p, t))
         train = torch.as_tensor(self.train, device=device)
-        x_valid = inputs[torch.as_tensor(self.valid, device=device)]
-        y_valid = targets[torch.as_tensor(self.valid, device=device)]
+        valid = torch.as_tensor(self.valid, device=device)
+        x_valid, y_valid, w_valid = inputs[valid], targets[valid], weights[valid]
+        value = (
+            ~loss.probability
+            if isinstance(loss, _BackboneLoss)
+            else torch.ones(targets.shape[-1], dtype=torch.bool, device=device)
+        )
         optimizer = torch.optim.Adam(module.parameters(), lr=learning_rate)
         scheduler = None
         if self.config.lr_decay_patience is not None:
@@ -304,7 +500,6 @@ class _StageRunner:
                 patience=self.config.lr_decay_patience,
                 min_lr=1e-2 * learning_rate,
             )
-        loss_fn = nn.functional.mse_loss
         best_loss, best_state, since_best = math.inf, None, 0
         history: list[dict[str, float]] = []
         bar = tqdm(range(max_epochs), desc=name, disable=not self.config.progress, leave=False)
@@ -314,15 +509,16 @@ class _StageRunner:
             total = 0.0
             for batch in permutation.split(self.config.batch_size):
                 optimizer.zero_grad(set_to_none=True)
-                loss = loss_fn(forward(inputs[batch]), targets[batch])
-                loss.backward()
+                batch_loss = loss_fn(forward(inputs[batch]), targets[batch], weights[batch])
+                batch_loss.backward()
                 optimizer.step()
-                total += loss.item() * batch.numel()
+                total += batch_loss.item() * batch.numel()
             module.eval()
             with torch.no_grad():
                 predicted = forward(x_valid)
-                val_loss = loss_fn(predicted, y_valid).item()
-                val_pearson = _pearson(predicted, y_valid)
+                val_loss = loss_fn(predicted, y_valid, w_valid).item()
+                used = (w_valid > 0) & value if predicted.ndim == 3 else w_valid > 0
+                val_pearson = _pearson(predicted[used], y_valid[used])
             record = {
                 "epoch": epoch,
                 "loss": total / train.numel(),
