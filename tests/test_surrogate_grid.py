@@ -283,9 +283,10 @@ def test_the_network_learns_where_there_is_no_backbone(trained):
     assert report["surrogate"]["has_backbone"]["agreement"] == pytest.approx(np.mean(says == truth))
     assert np.mean(says == truth) >= 0.97
     assert np.sum(~truth) > 100  # a mask worth learning
-    # The majority (mean-curve) and linear-probability masks do clearly worse.
+    # The majority (mean-curve) and linear-probability masks disagree at least twice as often.
+    wrong = 1 - np.mean(says == truth)
     for baseline in ("mean_curve", "linear"):
-        assert report[baseline]["has_backbone"]["agreement"] < np.mean(says == truth) - 0.02
+        assert 1 - report[baseline]["has_backbone"]["agreement"] >= 2 * wrong
 
 
 def test_the_exported_grid_surrogate_carries_its_test_figures(trained, tmp_path):
