@@ -230,6 +230,8 @@ def main() -> None:
         json.dumps(
             {
                 "bench": "scaling",
+                "dask_speedup_1_to_2": speedup["dask_1_to_2"],
+                "cpu_ms_per_curve": 1e3 * cpu_per_curve,
                 "n_curves": n,
                 "model": "trc-like",
                 "harmonic": args.harmonic,

@@ -346,10 +346,24 @@ def main() -> None:
                 f"{row['train_s']:>9.0f}"
             )
 
+    summary = {}
+    for figures in results:
+        box, frequency = figures["box"], figures["analytical"]["frequency_hz"]
+        summary.update({
+            f"{box}_frequency_rmse_hz": frequency["rmse_surrogate"],
+            f"{box}_frequency_rmse_hz_linear": frequency["rmse_linear"],
+            f"{box}_frequency_to_linear": frequency["to_linear"],
+            f"{box}_frequency_to_scatter_max": frequency["to_scatter_max"],
+            f"{box}_mse_amplitude_mm2": figures["table5"]["surrogate"]["mse_amplitude_mm2"],
+            f"{box}_train_cpu_s": figures["train_cpu_s"],
+            f"{box}_predict_100_ms": figures["predict_100_ms"],
+        })  # fmt: skip
     print(
         json.dumps(
             {
                 "bench": "surrogate",
+                **summary,
+                "network_parameters": results[0]["network"]["parameters"] if results else None,
                 "representation": "amplitude_grid",
                 "model": model.to_dict()["equation"],
                 "parameter_names": names,

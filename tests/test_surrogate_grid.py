@@ -14,17 +14,20 @@ from __future__ import annotations
 
 import concurrent.futures
 import dataclasses
+import json
 import math
 import multiprocessing
 
 import numpy as np
 import pytest
 import torch
+from test_dataset import _duffing_curve
 
+from identification.artifacts import sha256_bytes
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
 from surrogates.baselines import LinearBaseline, MeanCurve
-from surrogates.dataset import BackboneDataset, add_measured, generate_dataset
+from surrogates.dataset import BackboneDataset, _canonical_bytes, add_measured, generate_dataset
 from surrogates.evaluate import accuracy_report, amplitudes_at_levels
 from surrogates.export import export_surrogate
 from surrogates.grid import GRID_CHANNELS, assembly_scatter, measured_on_grid
@@ -121,18 +124,9 @@ def test_spec_of_an_amplitude_grid():
 
 
 def duffing_curve(k3: float, label: str, levels: np.ndarray, shift_hz: float = 0.0) -> Backbone:
-    """Closed-form hardening curve on its own excitation levels (no van der Pol)."""
-    a = np.empty(levels.size)
-    for i, level in enumerate(levels):  # C a ω(a) = level, increasing in a
-        low, high = 0.0, level / (C * math.sqrt(K))
-        for _ in range(200):
-            mid = 0.5 * (low + high)
-            low, high = (mid, high) if C * mid * math.sqrt(K + 0.75 * k3 * mid**2) < level else (
-                low, mid)  # fmt: skip
-        a[i] = 0.5 * (low + high)
-    omega = np.sqrt(K + 0.75 * k3 * a**2)
-    return Backbone(a, omega / (2 * np.pi) + shift_hz, C / (2 * omega),
-                    excitation_level=levels, label=label)  # fmt: skip
+    """Closed-form hardening curve on its own excitation levels, its frequency shifted."""
+    curve = _duffing_curve((K, C, k3), levels, label)
+    return dataclasses.replace(curve, frequency_hz=curve.frequency_hz + shift_hz)
 
 
 def test_measured_curves_enter_where_they_cover_the_grid_with_their_label_misfit():
@@ -329,3 +323,27 @@ def test_serial_process_pool_and_dask_give_identical_datasets():
         distributed.Client(cluster) as client,
     ):  # fmt: skip
         _datasets_equal(serial, grid_data(**options, executor=client))
+
+
+def test_dataset_files_keep_splits_weights_and_misfits_and_read_version_1(tmp_path):
+    levels = np.geomspace(0.3, 6.0, 30)
+    curves = [duffing_curve(k3, f"a{i}", levels) for i, k3 in enumerate([1e10, 2e10, 2.5e10])]
+    labels = np.array([[1e10, 0.0], [2e10, 0.0], [2.5e10, 0.0]])
+    data = add_measured(grid_data(20), BackboneSet(curves), labels).with_splits(seed=2)
+    loaded = BackboneDataset.load(data.save(tmp_path / "grid.npz"))
+    for name in ("X", "Y", "observed", "partition", "weight", "label_misfit", "origin"):
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(data, name))
+    assert loaded.spec.to_dict() == data.spec.to_dict() and loaded.content_hash == data.content_hash
+    # A version-1 file (excitation levels, before these arrays) reads with their defaults.
+    mild = {"cubic_stiffness": (1e10, 2e10), "van_der_pol": (-1e3, 0.0)}
+    old = generate_dataset(MODEL, NAMES, 4, bounds=mild, n_levels=5, progress=False)
+    payload = {k: v for k, v in old._payload().items()
+               if k not in ("observed", "partition", "weight", "label_misfit")}  # fmt: skip
+    provenance = {**old.provenance, "format_version": 1}
+    payload["provenance"] = np.array(json.dumps(provenance, sort_keys=True))
+    np.savez(
+        tmp_path / "v1.npz", **payload, sha256=np.array(sha256_bytes(_canonical_bytes(payload)))
+    )
+    first = BackboneDataset.load(tmp_path / "v1.npz")
+    assert first.observed.all() and np.all(first.partition == "") and np.all(first.weight == 1)
+    np.testing.assert_array_equal(first.Y, old.Y)
