@@ -14,8 +14,8 @@ their labels; splits train / validation / test by origin (the measured curves
 all in test unless ``--measured-in-training``: the likelihood's curves are then
 no training data); the default surrogate (the paper's network) trained on the
 train split, stopped early on validation, scored on test beside the per-point
-linear regression and the mean curve fitted on the same curves, and against the
-assembly-to-assembly scatter of the measured curves
+linear and cubic regressions and the mean curve fitted on the same curves, and
+against the assembly-to-assembly scatter of the measured curves
 (:func:`surrogates.evaluate.accuracy_report`). Then the ONNX export, its
 agreement with torch, and 100 predictions on onnxruntime (one thread; paper:
 0.4073 s). The Table-5 study (accuracy against 200/300/400/500 training curves,
@@ -31,7 +31,7 @@ Prints tables, then ONE JSON line with every figure (units in the keys), the
 targets and the paper's values.
 
     .venv/bin/python bench/surrogate.py [--boxes demo,wide] [--n-curves 2000]
-        [--epochs 400] [--linear-head] [--table5-sizes 200,300,400,500]
+        [--epochs 400] [--head-degree 0|1|3] [--table5-sizes 200,300,400,500]
 """
 
 from __future__ import annotations
@@ -74,7 +74,11 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--epochs", type=int, default=None, help="cap on the AE and FFNN stages")
     parser.add_argument("--finetune-epochs", type=int, default=None)
     parser.add_argument("--batch-size", type=int, default=None)
-    parser.add_argument("--linear-head", action="store_true", help="residual on a linear head")
+    parser.add_argument(
+        "--head-degree", type=int, default=0,
+        help="0: the paper's network alone; 1 or 3: the network on the residual of a linear or "
+        "cubic regression head",
+    )  # fmt: skip
     parser.add_argument(
         "--measured-in-training",
         action="store_true",
@@ -142,9 +146,11 @@ def headline(report: dict, origin: str) -> dict:
         rows[channel] = {
             **{f"rmse_{m}": part["models"][m][channel]["rmse"] for m in part["models"]},
             "to_linear": ratios["to_linear"],
+            "to_cubic": ratios["to_cubic"],
             "to_mean_curve": ratios["to_mean_curve"],
             "to_scatter_max": ratios.get("to_scatter_max"),
             "linear_to_scatter_max": ratios.get("linear_to_scatter_max"),
+            "cubic_to_scatter_max": ratios.get("cubic_to_scatter_max"),
             "levels_with_scatter": ratios.get("levels_with_scatter"),
             "targets_met": part["targets_met"][channel],
         }
@@ -245,16 +251,19 @@ def print_box(figures: dict) -> None:
             print(f"   {origin} test curves: none")
             continue
         print(
-            f"   {origin} test curves       surrogate     linear       mean   ÷linear  "
-            "÷scatter(max)  linear÷scatter"
+            f"   {origin + ' test, RMSE':<26s}{'surrogate':>10s}{'linear':>10s}{'cubic':>10s}"
+            f"{'mean':>10s}{'÷linear':>9s}{'÷cubic':>8s}  ÷scatter (worst amplitude): "
+            "surrogate, linear, cubic"
         )
         for channel in CHANNELS:
             r = rows[channel]
-            fmt = lambda v: "—" if v is None else f"{v:.4g}"  # noqa: E731
+            fmt = lambda v: "—" if v is None else f"{v:.3g}"  # noqa: E731
             print(
-                f"   {channel:<24s}{fmt(r['rmse_surrogate']):>10s}{fmt(r['rmse_linear']):>11s}"
-                f"{fmt(r['rmse_mean_curve']):>11s}{fmt(r['to_linear']):>10s}"
-                f"{fmt(r['to_scatter_max']):>15s}{fmt(r['linear_to_scatter_max']):>16s}"
+                f"   {channel:<23s}{fmt(r['rmse_surrogate']):>10s}{fmt(r['rmse_linear']):>10s}"
+                f"{fmt(r['rmse_cubic']):>10s}{fmt(r['rmse_mean_curve']):>10s}"
+                f"{fmt(r['to_linear']):>9s}{fmt(r['to_cubic']):>8s}  "
+                f"{fmt(r['to_scatter_max'])}, {fmt(r['linear_to_scatter_max'])}, "
+                f"{fmt(r['cubic_to_scatter_max'])}"
             )
         mask = rows["has_backbone"]
         print(
@@ -278,7 +287,7 @@ def main() -> None:
     high = max(b.amplitude_range_m[1] for b in measured)
     grid = np.geomspace(low, high, 41)
     scatter = dict(zip(CHANNELS, assembly_scatter(measured, grid).T, strict=True))
-    config = TrainingConfig(seed=args.seed, progress=False, linear_head=args.linear_head)
+    config = TrainingConfig(seed=args.seed, progress=False, head_degree=args.head_degree)
     overrides = {
         "max_epochs": args.epochs,
         "finetune_epochs": args.finetune_epochs,
@@ -353,6 +362,8 @@ def main() -> None:
             f"{box}_frequency_rmse_hz": frequency["rmse_surrogate"],
             f"{box}_frequency_rmse_hz_linear": frequency["rmse_linear"],
             f"{box}_frequency_to_linear": frequency["to_linear"],
+            f"{box}_frequency_to_cubic": frequency["to_cubic"],
+            f"{box}_frequency_rmse_hz_cubic": frequency["rmse_cubic"],
             f"{box}_frequency_to_scatter_max": frequency["to_scatter_max"],
             f"{box}_mse_amplitude_mm2": figures["table5"]["surrogate"]["mse_amplitude_mm2"],
             f"{box}_train_cpu_s": figures["train_cpu_s"],

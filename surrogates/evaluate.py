@@ -9,8 +9,9 @@ The figures are plain numpy so they apply to any predictor (the torch
     unobserved point does not count), overall and per grid point, and how well
     a predicted mask agrees with the true one.
 :func:`test_report`
-    The surrogate, the :class:`~surrogates.baselines.LinearBaseline` and the
-    :class:`~surrogates.baselines.MeanCurve` (both fitted on the same training
+    The surrogate, the per-point linear and cubic regressions
+    (:class:`~surrogates.baselines.PolynomialBaseline`) and the
+    :class:`~surrogates.baselines.MeanCurve` (all fitted on the same training
     rows) on a dataset's **test** split, analytical and measured curves apart;
     the surrogate's errors as ratios to the linear baseline's and to the
     assembly-to-assembly scatter (:func:`~surrogates.grid.assembly_scatter`),
@@ -32,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from surrogates.baselines import LinearBaseline, MeanCurve
+from surrogates.baselines import MeanCurve, PolynomialBaseline
 from surrogates.runtime import MASK_CHANNEL, SurrogateSpec
 
 if TYPE_CHECKING:
@@ -42,6 +43,7 @@ if TYPE_CHECKING:
 __all__ = [
     "BASELINES",
     "PAPER_TABLE5",
+    "REGRESSION_BASELINES",
     "TARGETS",
     "accuracy_report",
     "amplitudes_at_levels",
@@ -125,8 +127,10 @@ def _pearson(a: np.ndarray, b: np.ndarray) -> float:
 #: Targets of the issue: test error ≤ 0.1 × the assembly scatter (every grid point) and
 #: ≤ 0.1 × the linear baseline's error, in each channel.
 TARGETS = {"to_scatter_max": 0.1, "to_linear": 0.1}
-#: What each accuracy figure is compared against, besides the surrogate.
-BASELINES = ("linear", "mean_curve")
+#: What each accuracy figure is compared against, besides the surrogate: the per-point
+#: regressions of these degrees on the parameters, and the mean curve.
+REGRESSION_BASELINES = {"linear": 1, "cubic": 3}
+BASELINES = (*REGRESSION_BASELINES, "mean_curve")
 
 
 def _json_float(value: float) -> float | None:
@@ -207,14 +211,14 @@ def _ratios(
             )
         if scatter is not None and name in scatter:
             spread = np.asarray(scatter[name], dtype=float)
-            for model in ("surrogate", "linear"):
+            for model in ("surrogate", *REGRESSION_BASELINES):
                 per_level = np.array(
                     [np.nan if v is None else v for v in models[model][name]["rmse_per_level"]]
                 )
                 with np.errstate(invalid="ignore", divide="ignore"):
                     ratio = per_level / spread
                 known = np.isfinite(ratio)
-                prefix = "" if model == "surrogate" else "linear_"
+                prefix = "" if model == "surrogate" else f"{model}_"
                 entry[f"{prefix}to_scatter_per_level"] = [_json_float(v) for v in ratio]
                 entry[f"{prefix}to_scatter_max"] = (
                     _json_float(ratio[known].max()) if known.any() else None
@@ -265,16 +269,18 @@ def accuracy_report(
         split), ``representation``, ``scatter``, ``targets``, and per origin
         (``analytical``, ``measured``; None when the split has no such curve)
         ``n_curves``, ``models`` (:func:`channel_errors` of ``surrogate``,
-        ``linear``, ``mean_curve``), ``ratios`` and ``targets_met``; ``table5``:
+        ``linear``, ``cubic``, ``mean_curve``), ``ratios`` and ``targets_met``; ``table5``:
         the paper's amplitude figures at excitation levels (see :func:`table5_figures`).
     """
     spec = dataset.spec
     train, rows = dataset.in_split("train"), dataset.in_split(split)
     weights = dataset.loss_weights()
-    fitted = {
-        "linear": LinearBaseline.fit(spec, dataset.X[train], dataset.Y[train], weights[train]),
-        "mean_curve": MeanCurve.fit(spec, dataset.X[train], dataset.Y[train], weights[train]),
+    x_train, y_train, w_train = dataset.X[train], dataset.Y[train], weights[train]
+    fitted: dict[str, Any] = {
+        name: PolynomialBaseline.fit(spec, x_train, y_train, w_train, degree)
+        for name, degree in REGRESSION_BASELINES.items()
     }
+    fitted["mean_curve"] = MeanCurve.fit(spec, x_train, y_train, w_train)
     x, truth, w = dataset.X[rows], dataset.Y[rows], weights[rows]
     predictions = {"surrogate": np.asarray(predict(x), dtype=float)}
     predictions.update({name: model.predict(x) for name, model in fitted.items()})
@@ -412,16 +418,16 @@ def table5_study(
     Each size trains a fresh surrogate on the first ``size`` curves of one seeded
     permutation of the dataset's train split (so the sets are nested), stops it
     early on the whole validation split and scores it on the test split, beside
-    the linear and mean-curve baselines fitted on the same curves
+    the linear, cubic and mean-curve baselines fitted on the same curves
     (:func:`accuracy_report`).
 
     Returns
     -------
     list of dict
         One row per size: ``n_train``, ``n_validation``, ``n_test``; the
-        frequency RMSE (Hz) of the surrogate and both baselines on the test
-        split's analytical curves, with the ratios to the linear baseline and to
-        the scatter; the paper's amplitude figures at excitation levels
+        frequency RMSE (Hz) of the surrogate and the baselines on the test
+        split's analytical curves, with the ratios to the linear and cubic
+        baselines and to the scatter; the paper's amplitude figures at excitation levels
         (:func:`table5_figures`; ``table5_representation`` says how they were
         made); the training seconds; the paper's MSE / MAE / MAPE for that
         size (None where the paper has no row).
@@ -453,8 +459,10 @@ def table5_study(
                 "n_test": report["counts"]["all"]["test"],
                 "rmse_frequency_hz": frequency.get("surrogate"),
                 "rmse_frequency_hz_linear": frequency.get("linear"),
+                "rmse_frequency_hz_cubic": frequency.get("cubic"),
                 "rmse_frequency_hz_mean_curve": frequency.get("mean_curve"),
                 "frequency_to_linear": ratios.get("to_linear"),
+                "frequency_to_cubic": ratios.get("to_cubic"),
                 "frequency_to_scatter_max": ratios.get("to_scatter_max"),
                 "table5_representation": table5.get("representation"),
                 "mse_amplitude_mm2": table5.get("surrogate", {}).get("mse_amplitude_mm2"),

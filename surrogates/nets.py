@@ -31,6 +31,8 @@ import torch
 from torch import nn
 from torch.nn import functional
 
+from surrogates.baselines import monomial_factors
+
 __all__ = [
     "Autoencoder",
     "Decoder",
@@ -171,11 +173,14 @@ class PhysicalSurrogate(nn.Module):
     ``y = s · scale + offset`` (``offset``, ``scale``: ``(n_levels, n_channels)``).
     Two optional parts:
 
-    ``linear_head``
-        ``(weight (n_params, n_levels, n_channels), bias (n_levels, n_channels))``:
-        ``s(u) = decoder(ffnn(u)) + u · weight + bias``, so the network learns
-        the residual of a linear regression (the baseline it must beat) rather
-        than the whole curve.
+    ``head``
+        ``(degree, coefficients (n_monomials, n_levels, n_channels))``: a
+        polynomial in ``u`` per (level, channel), the monomials of
+        :func:`~surrogates.baselines.monomial_factors`;
+        ``s(u) = decoder(ffnn(u)) + head(u)``, so the network learns the residual
+        of a regression (a baseline it must beat) rather than the whole curve.
+        Each monomial is a product of ``degree`` factors ``u · select + offset``
+        (one-hot columns, or the constant 1), so the graph needs no gather.
     ``probability_channels``
         ``(n_channels,)`` booleans: those channels are logits in the scaled
         space and leave the graph through a sigmoid, as probabilities (the
@@ -194,7 +199,7 @@ class PhysicalSurrogate(nn.Module):
         output_offset: np.ndarray,
         output_scale: np.ndarray,
         *,
-        linear_head: tuple[np.ndarray, np.ndarray] | None = None,
+        head: tuple[int, np.ndarray] | None = None,
         probability_channels: np.ndarray | None = None,
     ) -> None:
         super().__init__()
@@ -204,11 +209,18 @@ class PhysicalSurrogate(nn.Module):
         self.register_buffer("input_span", _float32(bounds[:, 1] - bounds[:, 0]))
         self.register_buffer("output_offset", _float32(output_offset))
         self.register_buffer("output_scale", _float32(output_scale))
-        self.has_linear_head = linear_head is not None
-        if linear_head is not None:
-            weight, bias = (np.asarray(a, dtype=np.float64) for a in linear_head)
-            self.register_buffer("linear_weight", _float32(weight.reshape(weight.shape[0], -1)))
-            self.register_buffer("linear_bias", _float32(bias))
+        self.head_degree = 0 if head is None else int(head[0])
+        if head is not None:
+            factors = monomial_factors(bounds.shape[0], self.head_degree)
+            select = np.zeros((self.head_degree, bounds.shape[0], len(factors)))
+            for k, column in np.argwhere(factors.T > 0):
+                select[k, factors[column, k] - 1, column] = 1.0
+            coefficients = np.asarray(head[1], dtype=np.float64)
+            self.register_buffer("head_select", _float32(select))
+            self.register_buffer("head_offset", _float32((factors.T == 0).astype(float)))
+            self.register_buffer(
+                "head_weight", _float32(coefficients.reshape(coefficients.shape[0], -1))
+            )
         self.has_probabilities = probability_channels is not None and bool(
             np.any(probability_channels)
         )
@@ -222,19 +234,21 @@ class PhysicalSurrogate(nn.Module):
         """Physical parameters → the unit box the FFNN was trained on."""
         return (parameters - self.input_low) / self.input_span
 
-    def linear_part(self, unit_parameters: torch.Tensor) -> torch.Tensor:
-        """The linear head's contribution in the scaled space (0 without one)."""
-        if not self.has_linear_head:
+    def head_part(self, unit_parameters: torch.Tensor) -> torch.Tensor:
+        """The polynomial head's contribution in the scaled space (0 without one)."""
+        if not self.head_degree:
             return torch.zeros((), device=unit_parameters.device)
-        flat = unit_parameters @ self.linear_weight
-        return flat.reshape(-1, *self.linear_bias.shape) + self.linear_bias
+        features = unit_parameters @ self.head_select[0] + self.head_offset[0]
+        for k in range(1, self.head_degree):
+            features = features * (unit_parameters @ self.head_select[k] + self.head_offset[k])
+        return (features @ self.head_weight).reshape(-1, *self.output_offset.shape)
 
     def scaled_backbones(self, unit_parameters: torch.Tensor) -> torch.Tensor:
         """Unit-box parameters → backbones in the training (scaled) space."""
         latent_part = self.decoder(self.regressor(unit_parameters))
-        if not self.has_linear_head:
+        if not self.head_degree:
             return latent_part
-        return latent_part + self.linear_part(unit_parameters)
+        return latent_part + self.head_part(unit_parameters)
 
     def forward(self, parameters: torch.Tensor) -> torch.Tensor:
         scaled = self.scaled_backbones(self.scale_parameters(parameters))
@@ -260,7 +274,7 @@ def network_sizes(model: PhysicalSurrogate, autoencoder: Autoencoder, config: Ne
         "kernel_size": config.kernel_size,
         "dilation": config.dilation,
         "ffnn": [int(n_params), *[config.ffnn_width] * config.ffnn_depth, config.latent_dim],
-        "linear_head": model.has_linear_head,
+        "head_degree": model.head_degree,
         "parameters": {
             "encoder": count(autoencoder.encoder),
             "decoder": count(autoencoder.decoder),

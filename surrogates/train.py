@@ -21,9 +21,10 @@ output). The weights (:meth:`~surrogates.dataset.BackboneDataset.loss_weights`)
 are 0 where a value is masked or was not observed, so neutral targets teach
 nothing; without weights every entry weighs 1 (plain MSE).
 
-``linear_head`` (ours, optional): a per-(level, channel) linear regression on the
-parameters, fitted to the training rows, is part of the graph and the networks
-learn its residual; the autoencoder then compresses only what the linear model
+``head_degree`` (ours, optional): a per-(level, channel) polynomial regression on
+the parameters (:class:`~surrogates.baselines.PolynomialBaseline`, 1: linear,
+3: cubic), fitted to the training rows, is part of the graph and the networks
+learn its residual; the autoencoder then compresses only what the regression
 misses.
 
 Every stage uses Adam (lr 1e-3; 1e-4 for the fine-tune; halved on plateaus),
@@ -52,7 +53,7 @@ from numpy.typing import ArrayLike
 from torch import nn
 from tqdm.auto import tqdm
 
-from surrogates.baselines import LinearBaseline
+from surrogates.baselines import PolynomialBaseline
 from surrogates.dataset import MEASURED_PREFIX, BackboneDataset
 from surrogates.evaluate import accuracy_report, backbone_metrics, channel_errors
 from surrogates.nets import (
@@ -86,8 +87,9 @@ class TrainingConfig:
     trc-like benchmark (``bench/surrogate.py``) as 3000 constant-rate epochs per
     stage with early stopping, in about a quarter of the time. ``threads`` sets
     torch's CPU threads for the training (None: leave torch's setting).
-    ``linear_head`` adds a per-(level, channel) linear regression to the graph
-    and trains the networks on its residual (see the module docstring).
+    ``head_degree`` (0: none, the paper's) adds a per-(level, channel) polynomial
+    regression of that degree to the graph and trains the networks on its
+    residual (see the module docstring).
     ``validation_fraction`` applies when no validation rows are given.
     """
 
@@ -102,7 +104,7 @@ class TrainingConfig:
     lr_decay_factor: float = 0.5
     validation_fraction: float = 0.2
     output_scaling: Literal["level", "channel"] = "level"
-    linear_head: bool = False
+    head_degree: int = 0
     seed: int = 0
     device: str | None = None
     threads: int | None = 1
@@ -119,6 +121,8 @@ class TrainingConfig:
             raise ValueError(
                 f"lr_decay_factor must be in (0, 1) and lr_decay_patience >= 0: {self}"
             )
+        if self.head_degree not in (0, 1, 2, 3):
+            raise ValueError(f"head_degree must be 0 (none), 1, 2 or 3: {self.head_degree}")
         if min(self.max_epochs, self.patience, self.batch_size) < 1 or self.finetune_epochs < 0:
             raise ValueError(f"epochs, patience and batch size must be positive: {self}")
 
@@ -312,8 +316,8 @@ def train_surrogate(
     scaled = np.where(neutral, 0.0, (y - offset) / scale)
     unit = (x - spec.bounds[:, 0]) / np.ptp(spec.bounds, axis=1)
     head = None
-    if config.linear_head:
-        head = _linear_head(spec, x[train], y[train], w[train], offset, scale)
+    if config.head_degree:
+        head = _polynomial_head(spec, x[train], y[train], w[train], offset, scale, config)
 
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
@@ -321,7 +325,7 @@ def train_surrogate(
         regressor = LatentRegressor(spec.n_params, config.net)
     model = PhysicalSurrogate(
         regressor, autoencoder.decoder, spec.bounds, offset, scale,
-        linear_head=head, probability_channels=probability,
+        head=head, probability_channels=probability,
     )  # fmt: skip
     model.to(device)
     autoencoder.to(device)
@@ -330,9 +334,9 @@ def train_surrogate(
     scaled_y = torch.as_tensor(scaled, dtype=torch.float32, device=device)
     loss_weights = torch.as_tensor(w, dtype=torch.float32, device=device)
     with torch.no_grad():
-        # The autoencoder compresses what the linear head leaves (all of it without one).
+        # The autoencoder compresses what the head leaves (all of it without one).
         residual = torch.where(
-            torch.as_tensor(neutral, device=device), scaled_y, scaled_y - model.linear_part(unit_x)
+            torch.as_tensor(neutral, device=device), scaled_y, scaled_y - model.head_part(unit_x)
         )
     shuffle = torch.Generator().manual_seed(config.seed)
     stage = _StageRunner(config, shuffle, train, valid)
@@ -354,7 +358,7 @@ def train_surrogate(
         history["finetune"] = stage.run(
             "finetune", model, unit_x, scaled_y, config.finetune_learning_rate,
             config.finetune_epochs,
-            forward=model.scaled_backbones,  # FFNN + decoder (+ linear head), scaled space
+            forward=model.scaled_backbones,  # FFNN + decoder (+ head), scaled space
             loss=loss, weights=loss_weights,
         )  # fmt: skip
 
@@ -415,23 +419,24 @@ def train_on_dataset(
     return surrogate
 
 
-def _linear_head(
+def _polynomial_head(
     spec: SurrogateSpec,
     parameters: np.ndarray,
     backbones: np.ndarray,
     weights: np.ndarray,
     offset: np.ndarray,
     scale: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The :class:`~surrogates.baselines.LinearBaseline` in the scaled space: ``(weight, bias)``.
+    config: TrainingConfig,
+) -> tuple[int, np.ndarray]:
+    """The :class:`~surrogates.baselines.PolynomialBaseline` in the scaled space.
 
     Zero for a probability channel: the mask stays the network's alone.
     """
-    coefficients = LinearBaseline.fit(spec, parameters, backbones, weights).coefficients
-    weight, bias = coefficients[1:] / scale, (coefficients[0] - offset) / scale
-    probability = np.array([c == MASK_CHANNEL for c in spec.channels])
-    weight[..., probability], bias[..., probability] = 0.0, 0.0
-    return weight, bias
+    fitted = PolynomialBaseline.fit(spec, parameters, backbones, weights, config.head_degree)
+    coefficients = fitted.coefficients / scale
+    coefficients[0] -= offset / scale
+    coefficients[..., [c == MASK_CHANNEL for c in spec.channels]] = 0.0
+    return config.head_degree, coefficients
 
 
 class _BackboneLoss:

@@ -26,7 +26,7 @@ from test_dataset import _duffing_curve
 from identification.artifacts import sha256_bytes
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
-from surrogates.baselines import LinearBaseline, MeanCurve
+from surrogates.baselines import MeanCurve, PolynomialBaseline, monomials
 from surrogates.dataset import BackboneDataset, _canonical_bytes, add_measured, generate_dataset
 from surrogates.evaluate import accuracy_report, amplitudes_at_levels
 from surrogates.export import export_surrogate
@@ -216,12 +216,17 @@ def test_baselines_are_fitted_on_the_train_split_alone():
     weights = data.loss_weights()
     train = data.in_split("train")
     unit = (data.X - data.spec.bounds[:, 0]) / np.ptp(data.spec.bounds, axis=1)
-    linear = LinearBaseline.fit(data.spec, data.X[train], data.Y[train], weights[train])
+    linear = PolynomialBaseline.fit(data.spec, data.X[train], data.Y[train], weights[train])
     level, channel = 20, data.spec.channel_index("frequency_hz")
     used = train[weights[train, level, channel] > 0]
     design = np.column_stack([np.ones(used.size), unit[used]])
     by_hand = np.linalg.lstsq(design, data.Y[used, level, channel], rcond=None)[0]
     np.testing.assert_allclose(linear.coefficients[:, level, channel], by_hand, rtol=1e-8)
+    cubic = PolynomialBaseline.fit(data.spec, data.X[train], data.Y[train], weights[train], 3)
+    design = monomials(unit[used], 3)  # 10 monomials of (k3, v): 1, u1, u2, u1², u1 u2, … u2³
+    assert design.shape[1] == 10 and np.allclose(design[:, 4], unit[used, 0] * unit[used, 1])
+    by_hand = np.linalg.lstsq(design, data.Y[used, level, channel], rcond=None)[0]
+    np.testing.assert_allclose(cubic.coefficients[:, level, channel], by_hand, rtol=1e-6)
     mean = MeanCurve.fit(data.spec, data.X[train], data.Y[train], weights[train])
     assert mean.curve[level, channel] == pytest.approx(data.Y[used, level, channel].mean())
     # The report's baseline is that fit: its test error by hand, and no other split enters.
@@ -240,6 +245,11 @@ def test_baselines_are_fitted_on_the_train_split_alone():
     # The predictor is the linear baseline itself: its ratio to the baseline is exactly 1.
     assert analytical["ratios"]["frequency_hz"]["to_linear"] == pytest.approx(1.0)
     assert analytical["models"]["mean_curve"]["frequency_hz"]["rmse"] > linear_rmse
+    # The cubic response surface is the stronger peer on this curved map.
+    assert analytical["ratios"]["frequency_hz"]["to_cubic"] > 1.0
+    # Too few rows for a cubic: an entry keeps the highest degree it can carry.
+    few = PolynomialBaseline.fit(data.spec, data.X[train[:12]], data.Y[train[:12]], 1.0, 3)
+    assert np.all(few.coefficients[6:] == 0) and np.any(few.coefficients[3:6] != 0)
 
 
 def test_amplitudes_at_levels_invert_the_closed_form():
@@ -263,7 +273,7 @@ def trained():
     data = grid_data(320, seed=5).with_splits(0.15, 0.15, seed=0)
     net = NetConfig(latent_dim=16, conv_filters=(16, 8), ffnn_width=64, ffnn_depth=3)
     config = TrainingConfig(net=net, max_epochs=200, finetune_epochs=100, progress=False,
-                            linear_head=True)  # fmt: skip
+                            head_degree=3)  # fmt: skip
     return data, train_on_dataset(data, config)
 
 
@@ -296,9 +306,15 @@ def test_the_exported_grid_surrogate_carries_its_test_figures(trained, tmp_path)
     sidecar = runtime.metadata
     assert sidecar["representation"] == "amplitude_grid"
     assert sidecar["test"]["counts"] == data.split_counts()
-    assert set(sidecar["test"]["analytical"]["models"]) == {"surrogate", "linear", "mean_curve"}
+    assert set(sidecar["test"]["analytical"]["models"]) == {
+        "surrogate",
+        "linear",
+        "cubic",
+        "mean_curve",
+    }
     network = sidecar["training"]["network"]
     assert network["input"] == [41, 4] and network["ffnn"] == [2, 64, 64, 64, 16]
+    assert network["head_degree"] == 3
     assert network["parameters"]["exported"] == sum(p.numel() for p in surrogate.model.parameters())
     assert sidecar["training"]["data"]["measured_in_training"] == []
 
