@@ -6,7 +6,7 @@ reassembly draws, PLL backbones at its 12 levels), the paper's likelihood
 uniform priors on every coefficient of the model structure, as the paper
 updates all of its model's: linear, viscous, cubic, and the microslip element's
 stiffness and slip force (the Jenkins coefficient is redundant with those two,
-:func:`identification.fitting.fit.default_free`). Boxes: ± 4 population spreads for the
+:func:`identification.fitting.least_squares.default_free`). Boxes: ± 4 population spreads for the
 coefficients the rig varies, ± 10 % for the microslip stiffness. The frequency
 likelihood does not see viscous damping (as in the paper, flat directions come
 with it). A surrogate is trained here first on that box (harmonic-balance
@@ -14,7 +14,7 @@ backbones on 41 excitation levels, amplitude and frequency: the paper's layout,
 with a smaller network than the paper's; sizes printed), its levels reaching
 0.03–3 mm on the nominal model so that the whole box covers the measured range.
 
-Runs, each a fresh :func:`pm_joint.updating.sample` call with 2 chains on the
+Runs, each a fresh :func:`pm_joint.sample` call with 2 chains on the
 2 cores, run lengths chosen so that fixed costs (compilation, process start)
 weigh alike:
 
@@ -52,10 +52,10 @@ import numpy as np
 import torch
 
 from identification.analytical.pll import pll_backbones
-from identification.fitting.fit import default_free
+from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.rig import RIG_PRESETS, Rig
-from pm_joint.updating import build_model, sample
+from pm_joint.inference import build_model, sample
 from surrogates import (
     NetConfig,
     SurrogateRuntime,

@@ -45,7 +45,7 @@ os.environ["NUMBA_NUM_THREADS"] = "1"
 
 import numpy as np
 
-from identification.fitting.fit import default_free
+from identification.fitting.least_squares import default_free
 from identification.rig import RIG_PRESETS
 from surrogates.dataset import BackboneDataset, generate_dataset
 

@@ -48,14 +48,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from identification.fitting.fit import default_free
+from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import BackboneSet
-from identification.measurements.records import Campaign
-from identification.model import JointModel
+from identification.model import JointModel, parameter_bounds
 from pm_joint import pipeline
 from pm_joint.demo import DEMO_LIBRARY
-from surrogates.dataset import add_measured, default_bounds, generate_dataset
-from surrogates.evaluate import PAPER_TABLE5, TARGETS, table5_study
+from pm_joint.studies import table5_study
+from pm_joint.workspace import Workspace
+from surrogates.dataset import add_measured, generate_dataset
+from surrogates.evaluate import PAPER_TABLE5, TARGETS
 from surrogates.export import export_surrogate
 from surrogates.grid import GRID_CHANNELS, assembly_scatter
 from surrogates.runtime import SurrogateRuntime
@@ -101,15 +102,12 @@ def demo_front(workdir: Path) -> tuple[JointModel, list[str], BackboneSet, np.nd
         workdir.mkdir(parents=True, exist_ok=True)
         start = time.process_time()
         pipeline.write_rig_campaign(
-            "trc-like", workdir / "records", assemblies=25, levels=10, seed=0, progress=False
+            "trc-like", workdir / "records", assemblies=25, n_levels=10, seed=0, progress=False
         )
-        pipeline.campaign_backbones(workdir / "records", files[1], progress=False)
-        model = pipeline.identify_campaign(
-            workdir / "records", DEMO_LIBRARY, records=3, out=files[0]
-        ).model
-        labels = pipeline.record_labels(
-            list(Campaign(workdir / "records")), model, default_free(model)
-        )
+        workspace = Workspace(workdir / "records", backbones_csv=files[1])
+        pipeline.campaign_backbones(workspace)
+        model = pipeline.identify_campaign(workspace, DEMO_LIBRARY, n_records=3, out=files[0]).model
+        labels = pipeline.label_records(workspace, default_free(model))
         np.save(files[2], labels)
         seconds["demo_front_cpu_s"] = time.process_time() - start
     model = JointModel.from_json(files[0])
@@ -118,7 +116,7 @@ def demo_front(workdir: Path) -> tuple[JointModel, list[str], BackboneSet, np.nd
 
 def demo_box(model: JointModel, names: list[str], labels: np.ndarray) -> np.ndarray:
     """± 20 % around the model, widened by 5 % of the span beyond every label (as the demo)."""
-    box = default_bounds(model, names, 0.2)
+    box = parameter_bounds(model, names, 0.2)
     margin = 0.05 * (box[:, 1] - box[:, 0])
     box[:, 0] = np.minimum(box[:, 0], labels.min(axis=0) - margin)
     box[:, 1] = np.maximum(box[:, 1], labels.max(axis=0) + margin)
@@ -302,7 +300,7 @@ def main() -> None:
         "assembly scatter of frequency (Hz) per amplitude: "
         f"{np.nanmin(scatter['frequency_hz']):.3g}–{np.nanmax(scatter['frequency_hz']):.3g}"
     )
-    boxes = {"demo": demo_box(model, names, labels), "wide": default_bounds(model, names, 0.5)}
+    boxes = {"demo": demo_box(model, names, labels), "wide": parameter_bounds(model, names, 0.5)}
     results = []
     for name in [b for b in args.boxes.split(",") if b]:
         figures = run_box(name, boxes[name], model, names, measured, labels, scatter, args, config)

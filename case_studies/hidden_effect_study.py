@@ -31,8 +31,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from identification.criticism.criticism import hidden_effect_study, plot_comparison, plot_history
+from identification.criticism.plots import plot_comparison, plot_history
 from identification.rig import RIG_PRESETS
+from pm_joint.studies import hidden_effect_study
 
 SMALL = os.environ.get("PM_JOINT_SIZE") == "small"
 OUT = os.environ.get("PM_JOINT_OUT", "case_study_output")

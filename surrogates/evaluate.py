@@ -1,4 +1,4 @@
-"""Accuracy of a backbone surrogate on held-out curves, beside its baselines, and the Table 5 study.
+"""Accuracy of a backbone surrogate on held-out curves, beside its baselines (Table 5 figures).
 
 The figures are plain numpy so they apply to any predictor (the torch
 :class:`~surrogates.train.Surrogate` or the onnxruntime
@@ -27,7 +27,7 @@ The figures are plain numpy so they apply to any predictor (the torch
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -38,7 +38,6 @@ from surrogates.runtime import MASK_CHANNEL, SurrogateSpec
 
 if TYPE_CHECKING:
     from surrogates.dataset import BackboneDataset
-    from surrogates.train import TrainingConfig
 
 __all__ = [
     "BASELINES",
@@ -50,7 +49,6 @@ __all__ = [
     "backbone_metrics",
     "channel_errors",
     "table5_figures",
-    "table5_study",
 ]
 
 #: Paper Table 5: training-set size → (MSE, MAE, MAPE) on its test set.
@@ -403,75 +401,3 @@ def table5_figures(
             "n_pairs_undefined": int(both.size - both.sum()),
         }
     return figures
-
-
-def table5_study(
-    dataset: BackboneDataset,
-    *,
-    sizes: Sequence[int] = (200, 300, 400, 500),
-    config: TrainingConfig | None = None,
-    seed: int = 0,
-    scatter: Mapping[str, ArrayLike] | None = None,
-) -> list[dict[str, Any]]:
-    """The paper's Table 5: accuracy against the number of training curves, on test figures.
-
-    Each size trains a fresh surrogate on the first ``size`` curves of one seeded
-    permutation of the dataset's train split (so the sets are nested), stops it
-    early on the whole validation split and scores it on the test split, beside
-    the linear, cubic and mean-curve baselines fitted on the same curves
-    (:func:`accuracy_report`).
-
-    Returns
-    -------
-    list of dict
-        One row per size: ``n_train``, ``n_validation``, ``n_test``; the
-        frequency RMSE (Hz) of the surrogate and the baselines on the test
-        split's analytical curves, with the ratios to the linear and cubic
-        baselines and to the scatter; the paper's amplitude figures at excitation levels
-        (:func:`table5_figures`; ``table5_representation`` says how they were
-        made); the training seconds; the paper's MSE / MAE / MAPE for that
-        size (None where the paper has no row).
-    """
-    # Imported here so that the metrics above stay usable without torch.
-    from surrogates.train import train_on_dataset
-
-    train = np.random.default_rng(seed).permutation(dataset.in_split("train"))
-    others = np.concatenate([dataset.in_split("validation"), dataset.in_split("test")])
-    if max(sizes) > train.size:
-        raise ValueError(f"size {max(sizes)} asked for, only {train.size} training curves exist")
-    rows = []
-    for size in sizes:
-        subset = dataset.subset(np.sort(np.concatenate([train[:size], others])))
-        surrogate = train_on_dataset(subset, config, scatter=scatter)
-        report = surrogate.test_report
-        analytical = report["analytical"] or {}
-        frequency = {
-            name: figures.get("frequency_hz", {}).get("rmse")
-            for name, figures in analytical.get("models", {}).items()
-        }
-        ratios = analytical.get("ratios", {}).get("frequency_hz", {})
-        table5 = report["table5"] or {}
-        paper = PAPER_TABLE5.get(size, (None, None, None))
-        rows.append(
-            {
-                "n_train": size,
-                "n_validation": surrogate.n_validation,
-                "n_test": report["counts"]["all"]["test"],
-                "rmse_frequency_hz": frequency.get("surrogate"),
-                "rmse_frequency_hz_linear": frequency.get("linear"),
-                "rmse_frequency_hz_cubic": frequency.get("cubic"),
-                "rmse_frequency_hz_mean_curve": frequency.get("mean_curve"),
-                "frequency_to_linear": ratios.get("to_linear"),
-                "frequency_to_cubic": ratios.get("to_cubic"),
-                "frequency_to_scatter_max": ratios.get("to_scatter_max"),
-                "table5_representation": table5.get("representation"),
-                "mse_amplitude_mm2": table5.get("surrogate", {}).get("mse_amplitude_mm2"),
-                "mae_amplitude_mm": table5.get("surrogate", {}).get("mae_amplitude_mm"),
-                "mape_amplitude_pct": table5.get("surrogate", {}).get("mape_amplitude_pct"),
-                "train_s": surrogate.train_seconds,
-                "paper_mse": paper[0],
-                "paper_mae": paper[1],
-                "paper_mape": paper[2],
-            }
-        )
-    return rows

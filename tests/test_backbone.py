@@ -1,4 +1,4 @@
-"""Backbone containers and their extraction from phase-resonance records."""
+"""Backbone containers: validation, interpolation, sets, tables and their CSV."""
 
 import matplotlib
 
@@ -7,126 +7,8 @@ matplotlib.use("Agg")
 import numpy as np
 import pandas as pd
 import pytest
-from scipy.integrate import cumulative_trapezoid
 
-from identification.measurements.backbone import (
-    TABLE_COLUMNS,
-    Backbone,
-    BackboneSet,
-    extract_backbone,
-    extract_backbones,
-)
-from identification.measurements.records import Campaign, Record, StepSchedule, write_record
-
-FS = 10_000.0
-HOLD_S = 0.8  # 80 periods at 100 Hz: room for the 70 measured ones
-RAMP_S = 0.05
-
-
-def synthetic_record(
-    amplitudes_m,
-    frequencies_hz,
-    damping,
-    phase_errors_deg=None,
-    third_harmonic=0.0,
-    levels=None,
-    name="Config1_PRT_Assemb1",
-    hold_s=HOLD_S,
-) -> Record:
-    """Pure harmonic steady states per hold, built from the definitions.
-
-    Relative displacement x = a cos θ, base displacement x_b = 2ζa·cos(θ + 90° − ε)
-    (leading x by 90° at phase resonance, ε the phase error), velocities their
-    time derivatives at constant frequency; ramps interpolate linearly. The
-    power balance then gives ζ·cos ε and the amplitude a. An optional third
-    harmonic in the response tests that it does not leak into the fundamental.
-    """
-    n = len(amplitudes_m)
-    eps = np.radians(np.zeros(n) if phase_errors_deg is None else phase_errors_deg)
-    levels = np.arange(1, n + 1) * 0.1 if levels is None else np.asarray(levels)
-    breakpoints = np.ravel(
-        [[k * (hold_s + RAMP_S), k * (hold_s + RAMP_S) + hold_s] for k in range(n)]
-    )
-    t = np.arange(round(breakpoints[-1] * FS) + 1) / FS
-    per_sample = [np.interp(t, breakpoints, np.repeat(v, 2)) for v in
-                  (amplitudes_m, frequencies_hz, damping, eps)]  # fmt: skip
-    a, f, zeta, e = per_sample
-    theta = 2 * np.pi * cumulative_trapezoid(f, t, initial=0.0) + 0.7
-    w = 2 * np.pi * f
-    v_rel = -a * w * np.sin(theta) - third_harmonic * a * 3 * w * np.sin(3 * theta + 0.4)
-    v_base = -2 * zeta * a * w * np.sin(theta + np.pi / 2 - e)
-    shape = np.linspace(0.3, 1.0, 15)
-    shape[7] = 1.0  # the centre point
-    base = np.column_stack([v_base + 2e-3, v_base - 2e-3])  # their mean is the base motion
-    phase_deg = np.degrees(np.angle(np.exp(1j * theta)))
-    data = np.column_stack([t, np.outer(v_rel, shape) + v_base[:, None], base, f, phase_deg])
-    return Record(data, StepSchedule(breakpoints, np.repeat(levels, 2)), name)
-
-
-AMPLITUDES = np.array([2e-5, 1.5e-4, 8e-4, 2.1e-3])
-FREQUENCIES = np.array([101.3, 99.7, 103.2, 109.9])
-DAMPING = np.array([0.002, 0.0065, 0.004, 0.0031])
-
-
-def test_extraction_recovers_the_known_backbone():
-    record = synthetic_record(AMPLITUDES, FREQUENCIES, DAMPING, third_harmonic=0.05)
-    backbone = extract_backbone(record)
-    np.testing.assert_allclose(backbone.amplitude_m, AMPLITUDES, rtol=1e-6)
-    np.testing.assert_allclose(backbone.frequency_hz, FREQUENCIES, rtol=1e-6)
-    np.testing.assert_allclose(backbone.damping_ratio, DAMPING, rtol=1e-6)
-    np.testing.assert_allclose(backbone.phase_error_deg, 0, atol=1e-6)
-    np.testing.assert_allclose(backbone.excitation_level, [0.1, 0.2, 0.3, 0.4])
-    assert backbone.label == "Config1_PRT_Assemb1"
-    np.testing.assert_allclose(backbone.amplitude_mm, 1e3 * AMPLITUDES, rtol=1e-6)
-
-
-def test_phase_error_and_active_power():
-    errors = np.array([4.0, -7.0, 0.5, 12.0])
-    record = synthetic_record(AMPLITUDES, FREQUENCIES, DAMPING, phase_errors_deg=errors)
-    backbone = extract_backbone(record, n_periods=50)
-    np.testing.assert_allclose(backbone.phase_error_deg, errors, rtol=1e-6)
-    # only the in-phase part of the excitation supplies power
-    np.testing.assert_allclose(
-        backbone.damping_ratio, DAMPING * np.cos(np.radians(errors)), rtol=1e-6
-    )
-
-
-def test_short_hold_phases(tmp_path):
-    record = synthetic_record(AMPLITUDES, FREQUENCIES, DAMPING, hold_s=0.5)
-    written = write_record(record, tmp_path)
-    campaign = Campaign(tmp_path)
-    with pytest.raises(ValueError) as error:
-        extract_backbone(campaign[0])
-    assert str(error.value) == (
-        f"{written}: hold phase at level 0.1 (0–0.5 s) holds 50.6 periods, "
-        "fewer than n_periods = 70"
-    )
-    with pytest.warns(UserWarning) as caught:
-        relaxed = extract_backbone(campaign[0], strict=False)
-    levels = (0.1, 0.2, 0.3, 0.4)
-    assert all(f"level {v} (" in str(w.message) for w, v in zip(caught, levels, strict=True))
-    assert "using its 50 whole periods" in str(caught[0].message)
-    np.testing.assert_allclose(relaxed.frequency_hz, FREQUENCIES, rtol=1e-6)
-
-
-def test_channel_sign_error_is_reported():
-    record = synthetic_record(AMPLITUDES[:2], FREQUENCIES[:2], DAMPING[:2])
-    flipped = record.data.copy()
-    flipped[:, 16:18] *= -1  # base channels wired with the wrong sign
-    flipped[:, 1:16] -= 2 * record.base_velocity[:, :1]
-    with pytest.raises(ValueError, match=r"from phase resonance .* check the signs"):
-        extract_backbone(Record(flipped, record.steps, record.name))
-
-
-def test_extract_backbones_of_a_campaign(tmp_path):
-    for i, name in enumerate(["Config2_PRT_Assemb1", "Config2_PRT_Assemb2"]):
-        write_record(
-            synthetic_record(AMPLITUDES * (1 + i), FREQUENCIES, DAMPING, name=name), tmp_path
-        )
-    curves = extract_backbones(Campaign(tmp_path), n_periods=60)
-    assert curves.labels == ["Config2_PRT_Assemb1", "Config2_PRT_Assemb2"]
-    np.testing.assert_allclose(curves[1].amplitude_m, 2 * AMPLITUDES, rtol=1e-6)
-
+from identification.measurements.backbone import TABLE_COLUMNS, Backbone, BackboneSet
 
 # ---------------------------------------------------------------------------
 # Containers
@@ -203,26 +85,6 @@ def test_set_range_matrix_and_labels():
         BackboneSet([_curve("a"), _curve("c", amplitude_mm=(3, 4, 5, 6))]).common_range()
 
 
-def test_table_and_csv_round_trip(tmp_path):
-    record = synthetic_record(AMPLITUDES, FREQUENCIES, DAMPING, phase_errors_deg=[1, 2, 3, 4])
-    curves = BackboneSet([extract_backbone(record, n_periods=40), _curve("model")])
-    table = curves.to_table()
-    assert list(table.columns) == list(TABLE_COLUMNS)
-    assert len(table) == 8 and table["phase_error_deg"].isna().sum() == 4
-
-    path = curves.to_csv(tmp_path / "backbones.csv")
-    back = BackboneSet.from_csv(path)
-
-    assert back.labels == curves.labels
-    for a, b in zip(curves, back, strict=True):
-        np.testing.assert_array_equal(a.frequency_hz, b.frequency_hz)
-        np.testing.assert_allclose(a.amplitude_m, b.amplitude_m, rtol=1e-15)
-        np.testing.assert_array_equal(a.damping_ratio, b.damping_ratio)
-        assert a.source == b.source
-    assert back["model"].phase_error_deg is None
-    np.testing.assert_array_equal(back[0].phase_error_deg, curves[0].phase_error_deg)
-
-
 def test_bad_tables_name_the_problem(tmp_path):
     with pytest.raises(ValueError, match=r"missing column\(s\) \['damping_ratio'\]"):
         BackboneSet.from_table(pd.DataFrame({"curve": ["a"], "amplitude_mm": [1.0],
@@ -240,3 +102,70 @@ def test_plot_draws_frequency_and_damping():
     np.testing.assert_allclose(freq_ax.lines[1].get_ydata(), [100, 99, 101, 104])
     np.testing.assert_allclose(damp_ax.lines[0].get_xdata(), [0.1, 0.5, 1.0, 2.0])
     assert damp_ax.get_ylabel() == "damping ratio (%)"
+
+
+# ---------------------------------------------------------------------------
+# What the hold fits measured: harmonics, their standard errors, the mean offset
+
+HARMONICS = np.array([[0.01 - 0.002j, 1e-3j], [0.02, -1e-3], [0.03 + 0.01j, 2e-3], [0.0, 0.0]])
+
+
+def test_hold_fit_arrays_are_checked_and_frozen():
+    curve = _curve(harmonics=HARMONICS, harmonic_standard_error=np.full((4, 2), 1e-5),
+                   mean_offset_m=[np.nan, 1e-6, np.nan, 2e-6])  # fmt: skip
+    assert curve.harmonic_orders == (2, 3)
+    assert curve.harmonics.dtype == complex and not curve.harmonics.flags.writeable
+    np.testing.assert_array_equal(curve.mean_offset_m, [np.nan, 1e-6, np.nan, 2e-6])
+    # a curve whose sensor never observes the mean has none
+    assert _curve(mean_offset_m=np.full(4, np.nan)).mean_offset_m is None
+    assert _curve(harmonics=HARMONICS[:, 0]).harmonic_orders == (2,)  # one order as a vector
+    with pytest.raises(ValueError, match=r"harmonics has shape \(3, 2\), expected \(4, n_orders\)"):
+        _curve(harmonics=HARMONICS[:3])
+    bad = HARMONICS.copy()
+    bad[2, 1] = np.nan
+    with pytest.raises(
+        ValueError, match=r"backbone 'a': excitation_harmonics\[2, 1\] is not finite"
+    ):
+        _curve(excitation_harmonics=bad)
+    with pytest.raises(ValueError, match="harmonic_standard_error needs harmonics"):
+        _curve(harmonic_standard_error=np.full((4, 2), 1e-5))
+    with pytest.raises(ValueError, match="harmonic_standard_error is negative"):
+        _curve(harmonics=HARMONICS, harmonic_standard_error=np.full((4, 2), -1.0))
+    with pytest.raises(ValueError, match="mean_offset_m must have 4 values"):
+        _curve(mean_offset_m=[0.0, np.inf, 0.0, 0.0])
+    stripped = BackboneSet([_curve(harmonics=HARMONICS, excitation_harmonics=HARMONICS)])
+    stripped = stripped.without_harmonics()[0]
+    assert stripped.harmonics is None and stripped.excitation_harmonics is None
+
+
+def test_harmonic_columns_round_trip_and_old_tables_still_read(tmp_path):
+    four = np.column_stack([HARMONICS, [1e-4, 2e-4, 0.0, -1e-4], [5e-5, 0.0, 0.0, 1e-5]])
+    curves = BackboneSet([
+        _curve("three", harmonics=HARMONICS, harmonic_standard_error=np.full((4, 2), 1e-5),
+               excitation_harmonics=0.5 * HARMONICS, mean_offset_m=[np.nan, 1e-6, 0.0, 2e-6]),
+        _curve("five", harmonics=four),
+        _curve("none"),
+    ])  # fmt: skip
+    table = curves.to_table()
+    # the cos part is the real part, the sin part minus the imaginary part (C_h − i S_h)
+    rows = table[table.curve == "three"]
+    np.testing.assert_array_equal(rows["harmonic2_cos"], HARMONICS[:, 0].real)
+    np.testing.assert_array_equal(rows["harmonic2_sin"], -HARMONICS[:, 0].imag)
+    np.testing.assert_array_equal(rows["mean_offset_mm"], [np.nan, 1e-3, 0.0, 2e-3])
+    # orders above 3 add their columns after the standard ones
+    assert list(table.columns[: len(TABLE_COLUMNS)]) == list(TABLE_COLUMNS)
+    assert {"harmonic5_cos", "harmonic5_sin", "harmonic5_se"} <= set(table.columns)
+    back = BackboneSet.from_csv(curves.to_csv(tmp_path / "backbones.csv"))
+    for name in ("harmonics", "harmonic_standard_error", "excitation_harmonics"):
+        for a, b in zip(curves, back, strict=True):
+            if getattr(a, name) is None:
+                assert getattr(b, name) is None, (a.label, name)
+            else:
+                np.testing.assert_array_equal(getattr(b, name), getattr(a, name))
+    assert back["five"].harmonic_orders == (2, 3, 4, 5)
+    np.testing.assert_array_equal(back["three"].mean_offset_m, curves["three"].mean_offset_m)
+    # a table written before the harmonics were kept
+    old = tmp_path / "old.csv"
+    old.write_text("curve,amplitude_mm,frequency_hz,damping_ratio\na,0.1,100,0.01\na,0.2,99,0.01\n")
+    (curve,) = BackboneSet.from_csv(old)
+    assert curve.harmonics is None and curve.mean_offset_m is None

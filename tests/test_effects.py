@@ -2,12 +2,17 @@
 
 Closed-form describing functions are checked against adaptive quadrature
 (scipy.integrate.quad) of the same numba force kernels, i.e. against the
-definition k_eq = (1/πa)∫f cos θ dθ, c_eq = −(1/πaω)∫f sin θ dθ.
+definition k_eq = (1/πa)∫f cos θ dθ, c_eq = −(1/πaω)∫f sin θ dθ; the pytensor
+graphs against the numpy describing functions (both come from one source per
+effect, with per-backend special functions); the declared parity and polynomial
+flags against the force kernels themselves. Tests parametrised over the
+catalogue cover a new effect module without being edited.
 """
 
 import numpy as np
+import pytensor.tensor as pt
 import pytest
-from scipy import integrate
+from scipy import integrate, special
 
 from identification.effects import (
     CATALOGUE,
@@ -16,6 +21,13 @@ from identification.effects import (
     memoryless_force,
     restoring_force,
 )
+from identification.effects.base import NUMPY, ArrayNamespace, FitScale, pytensor_namespace
+from identification.effects.special import TANH_QUADRATURE_POINTS
+from pm_joint.forward import describing_graph
+
+#: Mode of the graph checks: the math, not the backend, is under test.
+MATH = "FAST_COMPILE"
+MEMORYLESS = [name for name, effect in CATALOGUE.items() if not effect.hysteretic]
 
 DESIGN_NAMES = [
     "linear_stiffness",
@@ -63,7 +75,7 @@ SHAPES = {
 
 
 @pytest.mark.filterwarnings("ignore::scipy.integrate.IntegrationWarning")  # zero integrands
-@pytest.mark.parametrize("name", [n for n in DESIGN_NAMES if n != "microslip"])
+@pytest.mark.parametrize("name", MEMORYLESS)
 @pytest.mark.parametrize("a", [2e-5, 3e-4, 1.5e-3])
 def test_describing_function_matches_quadrature_of_the_force(name, a):
     effect = CATALOGUE[name]
@@ -168,3 +180,141 @@ def test_tanh_describing_function_across_its_table_and_limits(ratio):
     )
     assert k_eq == pytest.approx(k_ref, rel=1e-10)
     assert c_eq == 0.0
+
+
+# -- one source, two backends ---------------------------------------------------
+
+
+@pytest.mark.parametrize("effect", list(CATALOGUE))
+def test_describing_graph_matches_the_catalogue(effect):
+    a = np.geomspace(1e-6, 5e-3, 9)[:, None]
+    omega = np.array([250.0, 630.0, 1100.0])
+    shape = {n: 1.7 * v for n, v in CATALOGUE[effect].defaults.items()}  # not the defaults
+    k_want, c_want = CATALOGUE[effect].describing(a, omega, **shape)
+    k_got, c_got = (v.eval(mode=MATH) for v in describing_graph(effect, a, omega, **shape))
+    # Damping compared as the force it gives (c·ω, a stiffness), on the effect's scale.
+    scale = np.abs(k_want).max() + np.abs(c_want * omega).max()
+    np.testing.assert_allclose(k_got, k_want, rtol=1e-12, atol=1e-14 * scale)
+    np.testing.assert_allclose(c_got * omega, c_want * omega, rtol=1e-12, atol=1e-14 * scale)
+
+
+def _tanh_quadrature_error(u):
+    """Bound on the relative error of the periodic trapezoid sum of the tanh gain.
+
+    tanh(u cos θ) has its nearest complex singularity at Im θ = asinh(π/(2u)), so N
+    points are accurate to about exp(−N asinh(π/(2u))) (Trefethen & Weideman 2014).
+    """
+    return np.exp(-TANH_QUADRATURE_POINTS * np.arcsinh(np.pi / (2 * u)))
+
+
+@pytest.mark.parametrize("name", list(CATALOGUE))
+def test_numpy_and_pytensor_describing_agree_at_random_points(name):
+    effect = CATALOGUE[name]
+    rng = np.random.default_rng(list(CATALOGUE).index(name))
+    n = 400
+    a = np.exp(rng.uniform(np.log(1e-6), np.log(5e-3), n))
+    omega = 2 * np.pi * np.exp(rng.uniform(np.log(20.0), np.log(400.0), n))
+    # Shapes from a fifth to five times the defaults, one per point (the graph
+    # broadcasts shape arrays the way the backbone graph's parameter rows do).
+    shape = {
+        p: d * np.exp(rng.uniform(np.log(0.2), np.log(5.0), n)) for p, d in effect.defaults.items()
+    }
+    k_want, c_want = effect.describing(a, omega, **shape)
+    k_got, c_got = (v.eval(mode=MATH) for v in describing_graph(name, a, omega, **shape))
+    rtol = 1e-10
+    if name == "tanh_saturation":
+        rtol = rtol + _tanh_quadrature_error(a / shape["x_s"])
+    scale = np.abs(k_want) + np.abs(c_want * omega)  # both parts as stiffnesses
+    assert np.all(np.abs(k_got - k_want) <= rtol * scale), name
+    assert np.all(np.abs(c_got - c_want) * omega <= rtol * scale), name
+
+
+def test_array_namespaces_agree():
+    rng = np.random.default_rng(7)
+    x = rng.uniform(-0.99, 0.99, 50)  # inside the domain of arccos
+    positive = np.exp(rng.uniform(np.log(1e-3), np.log(30.0), 50))
+    xp = pytensor_namespace()
+    for field in ArrayNamespace.__dataclass_fields__:
+        if field == "name":
+            continue
+        if field == "where":
+            want = NUMPY.where(x > 0, x, -2 * x)
+            got = xp.where(x > 0, x, -2 * x).eval(mode=MATH)
+        else:
+            argument = positive if field in ("sqrt", "tanh_gain") else x
+            want = getattr(NUMPY, field)(argument)
+            got = getattr(xp, field)(pt.as_tensor(argument)).eval(mode=MATH)
+        rtol = 1e-12 + (_tanh_quadrature_error(positive) if field == "tanh_gain" else 0.0)
+        assert np.all(np.abs(got - want) <= rtol * np.abs(want)), field
+    # Dawson's integral against its definition D(x) = exp(−x²)∫₀ˣ exp(t²) dt.
+    for value in (0.3, 1.5, 4.0):
+        integral = integrate.quad(lambda t, v=value: np.exp(t * t - v * v), 0, value)[0]
+        assert NUMPY.dawsn(value) == pytest.approx(integral, rel=1e-12)
+    assert special.dawsn is NUMPY.dawsn
+
+
+def test_dawson_gradient_is_analytic():
+    x = pt.vector("x")
+    gradient = pt.grad(pt.sum(pytensor_namespace().dawsn(x)), x)
+    points = np.array([-2.0, 0.1, 0.9, 3.0])
+    step = 1e-6
+    expected = (special.dawsn(points + step) - special.dawsn(points - step)) / (2 * step)
+    np.testing.assert_allclose(gradient.eval({x: points}, mode=MATH), expected, rtol=1e-8)
+
+
+# -- the declared flags against the force -----------------------------------------
+
+
+@pytest.mark.parametrize("name", MEMORYLESS)
+def test_parity_is_that_of_the_force(name):
+    effect = CATALOGUE[name]
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-2e-3, 2e-3, 200)
+    v = rng.uniform(-0.5, 0.5, 200)
+    f, f_mirrored = effect.feature(x, v), effect.feature(-x, -v)
+    scale = np.max(np.abs(f))
+    odd = np.max(np.abs(f_mirrored + f)) <= 1e-12 * scale
+    even = np.max(np.abs(f_mirrored - f)) <= 1e-12 * scale
+    assert (odd, even) == {"odd": (True, False), "even": (False, True), "mixed": (False, False)}[
+        effect.parity
+    ]
+
+
+@pytest.mark.parametrize("name", MEMORYLESS)
+def test_polynomial_flag_is_that_of_the_force(name):
+    # A force of degree ≤ 3 in (x, ẋ) is reproduced exactly by the 10 monomials.
+    effect = CATALOGUE[name]
+    rng = np.random.default_rng(4)
+    x = rng.uniform(-1.0, 1.0, 400)
+    v = rng.uniform(-1.0, 1.0, 400)
+    shape = {p: 0.3 for p in effect.shape}  # friction and saturation well inside the box
+    f = effect.feature(x, v, **shape)
+    monomials = np.stack([x**i * v**j for i in range(4) for j in range(4 - i)], axis=1)
+    coefficients = np.linalg.lstsq(monomials, f, rcond=None)[0]
+    misfit = np.max(np.abs(monomials @ coefficients - f)) / np.max(np.abs(f))
+    if effect.polynomial:
+        assert misfit < 1e-12
+    else:
+        assert misfit > 1e-4
+
+
+def test_dispatch_gives_nothing_for_the_hysteretic_element_and_nan_beyond_the_catalogue():
+    microslip = CATALOGUE["microslip"]
+    assert microslip.force(1e-5, 0.0, 1e5, 1.0) == pytest.approx(1.0)  # virgin curve
+    assert memoryless_force(microslip.index, 1e-5, 0.0, 1e5, 1.0) == 0.0
+    assert np.isnan(memoryless_force(len(CATALOGUE), 1e-5, 0.0, 0.0, 0.0))
+
+
+# -- what the fits and the criticism take from an effect ---------------------------------
+
+
+def test_fit_grids_lie_inside_the_bounds_and_name_shape_parameters():
+    scale = FitScale.from_measurements([5e-5, 2e-4, 1.6e-3], [101.0, 99.5, 96.0], 4e5)
+    for effect in CATALOGUE.values():
+        grid, bounds = effect.shape_grid(scale), effect.shape_bounds(scale)
+        assert set(grid) <= set(bounds) <= set(effect.shape), effect.name
+        for shape, values in grid.items():
+            low, high = bounds[shape]
+            assert 0 < low < high
+            assert np.all((values > low) & (values < high)), f"{effect.name}.{shape}"
+        assert isinstance(effect.fitted_reading(1.0, effect.defaults, scale), str)

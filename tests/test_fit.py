@@ -1,24 +1,17 @@
 """Fitting JointModel parameters to backbones: recovery of known truths, the
-linearised start, the likelihood, the scatter model, record harmonics, errors."""
+linearised start, the likelihood, the scatter model, measured harmonics, errors."""
+
+import dataclasses
 
 import numpy as np
 import pytest
 from scipy import stats
 
 from identification.analytical.harmonic import backbone as harmonic_backbone
-from identification.fitting.fit import (
-    NOISE_FLOOR,
-    HoldHarmonics,
-    evaluate,
-    extract_harmonics,
-    fit_backbones,
-    fit_data,
-    measurement_levels,
-)
-from identification.measurements.backbone import Backbone, BackboneSet, extract_backbone
-from identification.measurements.records import Record, StepSchedule
+from identification.fitting.data import NOISE_FLOOR, fit_data, measurement_levels
+from identification.fitting.least_squares import evaluate, fit_backbones
+from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
-from identification.rig import trc_channels
 
 W0 = 2 * np.pi * 101.0
 K0 = W0**2
@@ -94,19 +87,21 @@ def test_microslip_is_recovered_from_a_shape_scan():
     assert result.model.linear_stiffness == pytest.approx(K0, rel=1e-4)
 
 
-def harmonics_of(models, measured, noise=0.0, seed=0):
-    """Record-like harmonics of each curve from the multi-harmonic balance."""
+def with_harmonics(models, measured, noise=0.0, seed=0):
+    """The curves with record-like harmonics from the multi-harmonic balance."""
     rng = np.random.default_rng(seed)
-    out = {}
+    out = []
     for m, curve in zip(models, measured, strict=True):
         hb = harmonic_backbone(m, curve.amplitude_m, method="multi")
         a = curve.amplitude_m[:, None]
         relative = (hb.harmonics_cos_m[:, 2:4] - 1j * hb.harmonics_sin_m[:, 2:4]) / a
         relative = relative + noise * (rng.standard_normal(relative.shape) + 0j)
-        out[curve.label] = HoldHarmonics(
-            curve.label, curve.amplitude_m, relative, np.full(relative.shape, 1e-6)
+        out.append(
+            dataclasses.replace(
+                curve, harmonics=relative, harmonic_standard_error=np.full(relative.shape, 1e-6)
+            )
         )
-    return out
+    return BackboneSet(out)  # fmt: skip
 
 
 def test_quadratic_stiffness_hides_in_the_backbone_and_shows_in_the_harmonics():
@@ -122,11 +117,10 @@ def test_quadratic_stiffness_hides_in_the_backbone_and_shows_in_the_harmonics():
     expected_shift = -(10 / 9) * k2**2 / K0
     shift = cubic_only.model.coefficient("cubic_stiffness") - k3
     assert shift == pytest.approx(expected_shift, rel=0.03)
-    # Over the full range, with the record harmonics, x² is recovered from a start of 0.
-    measured = curves([truth], noise_hz=0.002)
-    harmonics = harmonics_of([truth], measured, noise=1e-5)
+    # Over the full range, with the measured harmonics, x² is recovered from a start of 0.
+    measured = with_harmonics([truth], curves([truth], noise_hz=0.002), noise=1e-5)
     start = linear().with_effect("cubic_stiffness", 1e10).with_effect("quadratic_stiffness", 0.0)
-    result = fit_backbones(start, measured, harmonics=harmonics)
+    result = fit_backbones(start, measured)
     assert result.method == "multi"
     assert result.model.coefficient("quadratic_stiffness") == pytest.approx(k2, rel=0.01)
     assert result.model.coefficient("cubic_stiffness") == pytest.approx(k3, rel=0.02)
@@ -179,43 +173,6 @@ def test_scatter_at_levels_is_the_spread_across_curves():
     np.testing.assert_allclose(se, data.level_sigma / np.sqrt(3))
 
 
-def synthetic_record(harmonics, amplitude=1e-3, f=101.0, noise=0.0, seconds=1.0, fs=10_000.0):
-    """A one-hold record whose relative displacement has known harmonics
-    ``{h: C_h - i S_h}`` (relative to the fundamental a cos θ), at an arbitrary phase."""
-    t = np.arange(int(seconds * fs)) / fs
-    theta = 2 * np.pi * f * t + 0.7
-    w = 2 * np.pi * f
-    v = -amplitude * w * np.sin(theta)
-    for h, q in harmonics.items():
-        c, s = amplitude * q.real, -amplitude * q.imag
-        v += h * w * (-c * np.sin(h * theta) + s * np.cos(h * theta))
-    base = -1e-3 * np.cos(theta)  # leads the relative velocity by 90°: phase resonance
-    data = trc_channels(t, v, base, np.full(t.size, f), theta, noise_m_s=noise,
-                        rng=np.random.default_rng(1))  # fmt: skip
-    steps = StepSchedule([t[0], t[-1]], [1.0, 1.0])
-    return Record(data, steps, "Config1_PRT_Assemb1")
-
-
-def test_extract_harmonics_finds_known_harmonics_and_their_error():
-    known = {2: 0.03 - 0.01j, 3: -0.004 + 0.002j}
-    record = synthetic_record(known)
-    h = extract_harmonics([record], n_periods=70)["Config1_PRT_Assemb1"]
-    assert h.amplitude_m[0] == pytest.approx(1e-3, rel=1e-9)
-    np.testing.assert_allclose(h.relative[0], [known[2], known[3]], atol=1e-9)
-    # Same window as the backbone point.
-    point = extract_backbone(record)
-    assert point.amplitude_m[0] == pytest.approx(h.amplitude_m[0], rel=1e-12)
-    # With sensor noise: the reported standard error is the least-squares one,
-    # σ_v √(2/N) / (h ω a) with σ_v² = σ² (1 + 1/2) (centre minus the mean of two bases).
-    noisy = extract_harmonics([synthetic_record(known, noise=1e-3)])["Config1_PRT_Assemb1"]
-    n = round(70 / 101.0 * 10_000)
-    w = 2 * np.pi * 101.0
-    expected = 1e-3 * np.sqrt(1.5) * np.sqrt(2 / n) / (np.array([2, 3]) * w * 1e-3)
-    np.testing.assert_allclose(noisy.standard_error[0], expected, rtol=0.1)
-    error = np.abs(noisy.relative[0] - [known[2], known[3]])
-    assert np.all(error < 5 * np.sqrt(2) * expected)
-
-
 def test_bad_input_is_named():
     measured = curves([linear()], method="single")
     with pytest.raises(ValueError, match="unknown parameter"):
@@ -229,14 +186,29 @@ def test_bad_input_is_named():
         fit_backbones(linear(), measured, shape_scan={"viscous_damping": [1.0]})
     with pytest.raises(ValueError, match="unknown noise_floor"):
         fit_data(measured, noise_floor={"frequency": 0.1})
-    harmonics = harmonics_of([linear()], measured)
     with pytest.raises(ValueError, match="need method='multi'"):
-        fit_backbones(linear(), measured, harmonics=harmonics, method="single")
-    with pytest.raises(ValueError, match="no record harmonics for curve 'c0'"):
-        fit_data(measured, {"other": harmonics["c0"]})
+        fit_backbones(linear(), with_harmonics([linear()], measured), method="single")
 
 
 def test_too_sparse_data_is_refused():
     sparse = curves([linear(), linear(1.01)], amplitudes=np.array([1e-4, 1e-3]), method="single")
     with pytest.raises(ValueError, match="at least 3 are needed"):
         measurement_levels(sparse)
+
+
+def test_harmonic_channels_come_from_the_backbones():
+    """Curves carrying harmonics give the harmonic channels (cos = real, sin = −imag part,
+    their standard errors in the spread); a curve without them has NaN there, and the
+    backbones alone have the two backbone channels only."""
+    models = [linear().with_effect("quadratic_stiffness", -5e7)] * 2
+    measured = curves(models)
+    with_h = with_harmonics(models[:1], measured[:1])
+    mixed = BackboneSet([with_h[0], measured[1]])
+    data = fit_data(mixed)
+    assert data.channels[2:] == ("harmonic2_cos", "harmonic2_sin", "harmonic3_cos", "harmonic3_sin")
+    first, second = data.curve == 0, data.curve == 1
+    np.testing.assert_array_equal(data.values[first, 2], with_h[0].harmonics[:, 0].real)
+    np.testing.assert_array_equal(data.values[first, 5], -with_h[0].harmonics[:, 1].imag)
+    np.testing.assert_array_equal(data.standard_error[first, 2:], 1e-6)
+    assert np.isnan(data.values[second, 2:]).all()
+    assert fit_data(measured).channels == ("frequency_hz", "damping_ratio")

@@ -35,10 +35,11 @@ from hypothesis.extra.numpy import arrays
 from identification.artifacts import IntegrityError, sha256_bytes
 from identification.effects import CATALOGUE
 from identification.measurements import records
-from identification.measurements.backbone import Backbone, extract_backbone
+from identification.measurements.backbone import Backbone
+from identification.measurements.extraction import extract_backbone
 from identification.measurements.records import DATA_COLUMNS, Record, StepSchedule, read_record
 from identification.model import JointModel
-from pm_joint.likelihood import BackboneDensity
+from pm_joint.distributions import BackboneDensity
 from surrogates.runtime import MODEL_FILE, SIDECAR_FILE, SurrogateRuntime, SurrogateSpec
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -266,7 +267,7 @@ def synthetic_records(draw):
 
     Per hold: base velocity ``B cos φ``, relative velocity ``A ω sin φ`` (lagging
     by 90°), frequency channel f; so amplitude A, frequency f and damping ratio
-    ``B / (2 A ω)`` (module notes of :mod:`identification.measurements.backbone`).
+    ``B / (2 A ω)`` (module notes of :mod:`identification.measurements.extraction`).
     """
     n_holds = draw(st.integers(1, 3))
     holds = [

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from identification.analytical.harmonic import backbone as harmonic_backbone
-from identification.measurements.backbone import extract_backbones
+from identification.measurements.extraction import extract_backbones
 from identification.measurements.records import Campaign, Record, read_steps
 from identification.model import JointModel
 from identification.rig import (

@@ -22,7 +22,7 @@ from scipy import integrate
 
 from identification.analytical import harmonic
 from identification.effects import CATALOGUE, restoring_force
-from identification.measurements.backbone import extract_backbones
+from identification.measurements.extraction import extract_backbones
 from identification.measurements.records import DATA_COLUMNS, Record, StepSchedule, record_name
 from identification.measurements.signals import kinematics
 from identification.model import JointModel

@@ -49,6 +49,7 @@ from numpy.typing import ArrayLike
 
 from identification.checks import positive_vector
 from identification.effects import CATALOGUE, jenkins_force, memoryless_force
+from identification.effects.base import NUMPY
 from identification.model import JointModel
 
 __all__ = [
@@ -63,18 +64,6 @@ __all__ = [
 
 _EFFECTS_BY_INDEX = list(CATALOGUE.values())
 _MICROSLIP_PARAMETERS = ("microslip", "microslip.k_t", "microslip.F_s")
-# Polynomial forces of degree ≤ 3: the AFT sum is exact for them with 4H + 1 samples.
-_POLYNOMIAL = {
-    "linear_stiffness",
-    "viscous_damping",
-    "quadratic_stiffness",
-    "cubic_stiffness",
-    "cubic_damping",
-    "velocity_squared",
-    "stiffness_damping_coupling",
-    "displacement_velocity_squared",
-    "van_der_pol",
-}
 
 
 @dataclass(frozen=True)
@@ -236,18 +225,22 @@ def describing_sums(
     """
     k_total = np.zeros(np.broadcast_shapes(np.shape(a), np.shape(omega), (table.n_sets, 1)))
     c_total = np.zeros_like(k_total)
+    terms = []
     for i, index in enumerate(table.indices):
         effect = _EFFECTS_BY_INDEX[index]
         shape = {name: table.shapes[:, i, slot, None] for slot, name in enumerate(effect.shape)}
-        k_eq, c_eq = effect.describing(a, omega, **shape)
-        coefficient = table.coefficients[:, i, None]
-        k_total += coefficient * k_eq
-        c_total += coefficient * c_eq
+        terms.append((effect, table.coefficients[:, i, None], shape))
     if table.has_microslip:
         coefficient, k_t, f_s = (table.microslip[:, j, None] for j in range(3))
-        k_eq, c_eq = CATALOGUE["microslip"].describing(a, omega, k_t=k_t, F_s=f_s)
-        k_total += coefficient * k_eq
-        c_total += coefficient * c_eq
+        terms.append((CATALOGUE["microslip"], coefficient, {"k_t": k_t, "F_s": f_s}))
+    for effect, coefficient, shape in terms:
+        # The parts broadcast by themselves: a stiffness part stays the size of the
+        # amplitude grid, and a part that is zero costs nothing.
+        k_eq, c_eq = effect.describing_parts(NUMPY, a, omega, **shape)
+        if k_eq is not None:
+            k_total += coefficient * k_eq
+        if c_eq is not None:
+            c_total += coefficient * c_eq
     return k_total, c_total
 
 
@@ -312,7 +305,8 @@ def default_time_samples(model: JointModel, harmonics: int) -> int:
     ``a / x_s``.
     """
     n = 16 * harmonics
-    return n if _POLYNOMIAL.issuperset(model.effects) else max(2 * n, 128)
+    polynomial = all(CATALOGUE[effect].polynomial for effect in model.effects)
+    return n if polynomial else max(2 * n, 128)
 
 
 def _aft_tables(harmonics: int, n_time: int) -> dict[str, np.ndarray]:

@@ -1,22 +1,22 @@
-"""Backbone curves: containers and their extraction from phase-resonance records.
+"""Backbone curves: containers for what the hold fits of a test measured.
 
-A backbone point comes from one hold phase of a record (:mod:`identification.measurements.records`):
-the last ``N`` excitation periods are fitted with a Fourier series whose phase
-``φ(t) = 2π ∫ f(t) dt`` is the integral of the record's instantaneous-frequency
-channel, so a slowly drifting PLL frequency is followed exactly and no
-convention of the phase channel is assumed. With ``V_b`` and ``V`` the
-fundamental-harmonic complex amplitudes of the base velocity and of the
-centre-point velocity relative to the base (``v = Re(V e^{iφ})``), and
-``ω = 2π f`` the mean frequency over the window:
+A :class:`Backbone` holds one point per hold phase (or per model amplitude): the
+fundamental amplitude of the relative displacement, the phase-resonance
+frequency and the power-balance damping ratio (their definitions are in
+:mod:`identification.measurements.extraction`), and, where the points come from
+hold fits, what else those fits measured:
 
-* amplitude: ``|Q| = |V| / ω``, the relative-displacement fundamental (m);
-* phase error: ``arg(V / V_b) + 90°``, zero at phase resonance, where the
-  relative velocity lags the base velocity by 90°;
-* damping ratio from the power balance of base excitation: the active power
-  supplied per unit mass, ``½ Re(−iω V_b · conj(V))``, equals that of an
-  equivalent viscous damper, ``½ · 2Dω · |V|²``, so
-  ``D = |Q_b| cos(phase error) / (2 |Q|)`` — i.e. ``|Q_b| / (2|Q|)`` at
-  phase resonance, with ``Q_b = V_b / (iω)`` the base-displacement fundamental.
+* ``harmonics``: orders ``h = 2..H`` of the relative displacement
+  ``x = a cos θ + Σ_h (C_h cos hθ + S_h sin hθ)``, as complex fractions of the
+  fundamental in the frame where the fundamental is ``a cos θ``:
+  ``(C_h − i S_h) / a``; ``harmonic_standard_error`` the standard error of
+  each real component, from the fit residual;
+* ``excitation_harmonics``: orders ``2..H`` of the base acceleration in the same
+  form, relative to *its* fundamental (the forcing's distortion);
+* ``mean_offset_m``: the mean of the relative displacement where the sensor
+  observes it (NaN at points where it does not, e.g. velocity sensors).
+
+:class:`BackboneSet` writes and reads them as a tidy table (:data:`TABLE_COLUMNS`).
 """
 
 from __future__ import annotations
@@ -31,25 +31,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike
-from scipy.integrate import cumulative_trapezoid
 from scipy.interpolate import make_interp_spline
 
 from identification.artifacts import atomic_write_text
-from identification.measurements.records import Hold, Record
 
-__all__ = [
-    "TABLE_COLUMNS",
-    "Backbone",
-    "BackboneSet",
-    "HoldPoint",
-    "ShortHoldError",
-    "extract_backbone",
-    "extract_backbones",
-    "hold_point",
-]
+__all__ = ["TABLE_COLUMNS", "Backbone", "BackboneSet"]
 
-#: Columns of :meth:`BackboneSet.to_table`, in order.
-TABLE_COLUMNS = (
+_BASE_COLUMNS = (
     "curve",
     "excitation_level",
     "amplitude_mm",
@@ -59,6 +47,32 @@ TABLE_COLUMNS = (
     "source",
 )
 _REQUIRED_COLUMNS = ("curve", "amplitude_mm", "frequency_hz", "damping_ratio")
+
+
+def _order_columns(h: int) -> tuple[str, ...]:
+    """Columns of harmonic order ``h``: the response's parts, their standard error and
+    the excitation's parts."""
+    return (
+        f"harmonic{h}_cos",
+        f"harmonic{h}_sin",
+        f"harmonic{h}_se",
+        f"excitation_harmonic{h}_cos",
+        f"excitation_harmonic{h}_sin",
+    )
+
+
+#: Columns of :meth:`BackboneSet.to_table`, in order, with harmonics of orders 2 and 3
+#: (what :func:`~identification.measurements.extraction.extract_backbone` fits by
+#: default); curves that carry higher orders add :func:`_order_columns` of each after
+#: these.
+TABLE_COLUMNS = (*_BASE_COLUMNS, *_order_columns(2), *_order_columns(3), "mean_offset_mm")
+
+# Optional per-point arrays: name → (dtype, one column per harmonic order).
+_HARMONIC_FIELDS = {
+    "harmonics": complex,
+    "harmonic_standard_error": float,
+    "excitation_harmonics": complex,
+}
 
 
 # ---------------------------------------------------------------------------
@@ -85,6 +99,18 @@ class Backbone:
         Name of the curve (a record name for test records).
     source
         Where the curve comes from (a file, a model).
+    harmonics
+        ``(n_points, n_orders)`` complex harmonics ``h = 2, 3, …`` of the relative
+        displacement, fractions of the fundamental (see the module notes), or None.
+    harmonic_standard_error
+        ``(n_points, n_orders)`` standard error of each real component of
+        ``harmonics`` (fraction of the fundamental), or None (unknown).
+    excitation_harmonics
+        ``(n_points, n_orders)`` complex harmonics ``h = 2, 3, …`` of the base
+        acceleration, fractions of its fundamental, or None.
+    mean_offset_m
+        Mean of the relative displacement (m) per point, NaN where the sensor does
+        not observe it; None when no point does.
 
     The points are kept in the order given, so a test that steps up and down
     keeps both branches; interpolation (:meth:`frequency_at`,
@@ -98,6 +124,10 @@ class Backbone:
     phase_error_deg: np.ndarray | None = None
     label: str = ""
     source: str = ""
+    harmonics: np.ndarray | None = None
+    harmonic_standard_error: np.ndarray | None = None
+    excitation_harmonics: np.ndarray | None = None
+    mean_offset_m: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         where = f"backbone {self.label!r}" if self.label else "backbone"
@@ -127,6 +157,48 @@ class Backbone:
         if (self.frequency_hz <= 0).any():
             i = int(np.argmax(self.frequency_hz <= 0))
             raise ValueError(f"{where}: frequency_hz[{i}] is not positive ({self.frequency_hz[i]})")
+        self._check_hold_fit_arrays(where, n)
+
+    def _check_hold_fit_arrays(self, where: str, n: int) -> None:
+        """Validate and freeze the optional arrays of the hold fits."""
+        for name, dtype in _HARMONIC_FIELDS.items():
+            values = getattr(self, name)
+            if values is None:
+                continue
+            try:
+                array = np.array(values, dtype=dtype)
+            except (TypeError, ValueError):
+                raise ValueError(f"{where}: {name} must be numbers, got {values!r}") from None
+            if array.ndim == 1:  # one order
+                array = array.reshape(-1, 1)
+            if array.ndim != 2 or array.shape[0] != n or array.shape[1] == 0:
+                raise ValueError(
+                    f"{where}: {name} has shape {array.shape}, expected ({n}, n_orders): one "
+                    "row per point, a column per harmonic order from 2"
+                )
+            bad = np.argwhere(~np.isfinite(array))
+            if bad.size:
+                raise ValueError(f"{where}: {name}[{bad[0][0]}, {bad[0][1]}] is not finite")
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
+        se = self.harmonic_standard_error
+        if se is not None:
+            if self.harmonics is None or se.shape != self.harmonics.shape:
+                raise ValueError(
+                    f"{where}: harmonic_standard_error needs harmonics of the same shape"
+                    f" ({None if self.harmonics is None else self.harmonics.shape})"
+                )
+            if (se < 0).any():
+                raise ValueError(f"{where}: harmonic_standard_error is negative")
+        if self.mean_offset_m is not None:
+            offset = np.array(self.mean_offset_m, dtype=float).reshape(-1)
+            if offset.size != n or np.isinf(offset).any():
+                raise ValueError(
+                    f"{where}: mean_offset_m must have {n} values, finite or NaN (unobserved)"
+                )
+            offset.setflags(write=False)
+            # A curve no point of which observes its mean is a curve without one.
+            object.__setattr__(self, "mean_offset_m", None if np.isnan(offset).all() else offset)
 
     def __len__(self) -> int:
         return self.amplitude_m.size
@@ -134,6 +206,17 @@ class Backbone:
     @property
     def amplitude_mm(self) -> np.ndarray:
         return 1e3 * self.amplitude_m
+
+    @property
+    def harmonic_orders(self) -> tuple[int, ...]:
+        """Orders of the columns of :attr:`harmonics` (empty without harmonics)."""
+        return () if self.harmonics is None else tuple(range(2, 2 + self.harmonics.shape[1]))
+
+    def without_harmonics(self) -> Backbone:
+        """The curve without the response's and the excitation's harmonics."""
+        return dataclasses.replace(
+            self, harmonics=None, harmonic_standard_error=None, excitation_harmonics=None
+        )
 
     @cached_property
     def branch(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -236,6 +319,10 @@ class BackboneSet(Sequence[Backbone]):
     def labels(self) -> list[str]:
         return [b.label for b in self._curves]
 
+    def without_harmonics(self) -> BackboneSet:
+        """The curves without their harmonics: what the backbones alone show."""
+        return BackboneSet(b.without_harmonics() for b in self._curves)
+
     def common_range(self) -> tuple[float, float]:
         """Amplitude interval (m) covered by every curve."""
         if not self._curves:
@@ -259,35 +346,47 @@ class BackboneSet(Sequence[Backbone]):
 
     # -------------------------------------------------------------- tables
     def to_table(self) -> pd.DataFrame:
-        """Tidy table, one row per point, columns :data:`TABLE_COLUMNS` (NaN where absent)."""
+        """Tidy table, one row per point, columns :data:`TABLE_COLUMNS` (NaN where absent).
+
+        Harmonics are split into their cosine (real) and sine (minus imaginary)
+        parts; orders above 3 that some curve carries add their columns.
+        """
+        n_orders = max([2, *(len(b.harmonic_orders) for b in self._curves)])
+        orders = range(2, 2 + n_orders)
+        columns = TABLE_COLUMNS + tuple(c for h in orders[2:] for c in _order_columns(h))
         frames = []
         for b in self._curves:
             missing = np.full(len(b), np.nan)
-            frames.append(
-                pd.DataFrame(
-                    {
-                        "curve": b.label,
-                        "excitation_level": missing
-                        if b.excitation_level is None
-                        else b.excitation_level,
-                        "amplitude_mm": b.amplitude_mm,
-                        "frequency_hz": b.frequency_hz,
-                        "damping_ratio": b.damping_ratio,
-                        "phase_error_deg": missing
-                        if b.phase_error_deg is None
-                        else b.phase_error_deg,
-                        "source": b.source,
-                    }
-                )
-            )
+            frame = {
+                "curve": b.label,
+                "excitation_level": missing if b.excitation_level is None else b.excitation_level,
+                "amplitude_mm": b.amplitude_mm,
+                "frequency_hz": b.frequency_hz,
+                "damping_ratio": b.damping_ratio,
+                "phase_error_deg": missing if b.phase_error_deg is None else b.phase_error_deg,
+                "source": b.source,
+                "mean_offset_mm": missing if b.mean_offset_m is None else 1e3 * b.mean_offset_m,
+            }
+            for prefix, values in (("harmonic", b.harmonics),
+                                   ("excitation_harmonic", b.excitation_harmonics)):  # fmt: skip
+                for m, h in enumerate(orders):
+                    inside = values is not None and m < values.shape[1]
+                    frame[f"{prefix}{h}_cos"] = values[:, m].real if inside else missing
+                    frame[f"{prefix}{h}_sin"] = -values[:, m].imag if inside else missing
+            se = b.harmonic_standard_error
+            for m, h in enumerate(orders):
+                inside = se is not None and m < se.shape[1]
+                frame[f"harmonic{h}_se"] = se[:, m] if inside else missing
+            frames.append(pd.DataFrame(frame, columns=list(columns)))
         if not frames:
             return pd.DataFrame(columns=list(TABLE_COLUMNS))
         return pd.concat(frames, ignore_index=True)
 
     @classmethod
     def from_table(cls, table: pd.DataFrame, source: str = "table") -> BackboneSet:
-        """Inverse of :meth:`to_table`; ``excitation_level``, ``phase_error_deg`` and
-        ``source`` are optional columns. Curves keep their order of first appearance."""
+        """Inverse of :meth:`to_table`; every column but :data:`_REQUIRED_COLUMNS` is
+        optional (tables written before the harmonics were kept still read).
+        Curves keep their order of first appearance."""
         missing = [c for c in _REQUIRED_COLUMNS if c not in table.columns]
         if missing:
             raise ValueError(f"{source}: missing column(s) {missing}; needs {_REQUIRED_COLUMNS}")
@@ -297,6 +396,7 @@ class BackboneSet(Sequence[Backbone]):
             for column in ("excitation_level", "phase_error_deg"):
                 values = rows.get(column)
                 fields[column] = None if values is None or values.isna().all() else values
+            fields |= _hold_fit_fields(rows)
             try:
                 curves.append(
                     Backbone(
@@ -357,203 +457,45 @@ class BackboneSet(Sequence[Backbone]):
         return freq_ax, damp_ax
 
 
-# ---------------------------------------------------------------------------
-# Extraction
+def _hold_fit_fields(rows: pd.DataFrame) -> dict[str, np.ndarray | None]:
+    """The harmonics, their standard errors and the mean offset of one curve's rows.
 
-
-class ShortHoldError(ValueError):
-    """A hold phase has fewer periods than asked for."""
-
-    def __init__(self, periods: float, n_periods: int) -> None:
-        super().__init__(f"holds {periods:.1f} periods, fewer than n_periods = {n_periods}")
-        self.periods = periods
-
-
-@dataclass(frozen=True)
-class HoldPoint:
-    """Backbone point of one hold phase (see the module notes for the definitions)."""
-
-    amplitude_m: float
-    frequency_hz: float
-    damping_ratio: float
-    phase_error_deg: float
-    periods: int
-
-
-def hold_window(
-    time_s: np.ndarray, frequency_hz: np.ndarray, n_periods: int
-) -> tuple[int, np.ndarray, float]:
-    """The last ``n_periods`` periods of a hold: first sample, phase from 0, mean ω.
-
-    The phase is ``2π ∫ f dt`` of the instantaneous-frequency channel, so the
-    window spans whole periods of the excitation even while the PLL moves.
-
-    Raises
-    ------
-    ValueError
-        If the frequency channel is not positive; :class:`ShortHoldError` if the
-        hold has fewer than ``n_periods`` periods.
+    A curve carries the orders ``2..H`` whose cosine column it fills; columns a
+    table lacks, or a curve leaves empty, give None.
     """
-    if (frequency_hz <= 0).any():
-        raise ValueError("the frequency channel is not positive")
-    phase = 2 * np.pi * cumulative_trapezoid(frequency_hz, time_s, initial=0.0)
-    periods = (phase[-1] - phase[0]) / (2 * np.pi)
-    if periods < n_periods:
-        raise ShortHoldError(periods, n_periods)
-    start = int(np.searchsorted(phase, phase[-1] - 2 * np.pi * n_periods, side="right") - 1)
-    phi = phase[start:] - phase[start]
-    return start, phi, float(phi[-1] / (time_s[-1] - time_s[start]))
 
+    def numbers(column: str) -> np.ndarray | None:
+        if column not in rows:
+            return None
+        values = pd.to_numeric(rows[column]).to_numpy(dtype=float)
+        return None if np.isnan(values).all() else values
 
-def fourier_basis(phi: np.ndarray, harmonics: int) -> np.ndarray:
-    """Columns ``[1, cos kφ…, sin kφ…]`` for ``k = 1..harmonics``."""
-    k = np.arange(1, harmonics + 1)
-    return np.column_stack([np.ones_like(phi), np.cos(np.outer(phi, k)), np.sin(np.outer(phi, k))])
+    def orders(prefix: str) -> list[int]:
+        found, h = [], 2
+        while numbers(f"{prefix}{h}_cos") is not None:
+            found.append(h)
+            h += 1
+        return found
 
+    def complex_parts(prefix: str, hs: list[int]) -> np.ndarray | None:
+        if not hs:
+            return None
+        values = np.full((len(rows), len(hs)), np.nan, dtype=complex)
+        for m, h in enumerate(hs):
+            values.real[:, m] = numbers(f"{prefix}{h}_cos")
+            sine = numbers(f"{prefix}{h}_sin")
+            if sine is not None:  # else NaN: the Backbone names the hole
+                values.imag[:, m] = -sine
+        return values
 
-def hold_point(
-    time_s: np.ndarray,
-    excitation_velocity: np.ndarray,
-    response_velocity: np.ndarray,
-    frequency_hz: np.ndarray,
-    n_periods: int = 70,
-    harmonics: int = 3,
-) -> HoldPoint:
-    """Backbone point from the last ``n_periods`` periods of one hold phase.
-
-    Parameters
-    ----------
-    time_s, excitation_velocity, response_velocity, frequency_hz
-        Samples of the hold phase: time, base velocity, centre velocity relative
-        to the base, instantaneous excitation frequency.
-    n_periods
-        Whole periods used, counted back from the end of the hold.
-    harmonics
-        Harmonics fitted along with the fundamental (and a constant) so that
-        their leakage through a window of a non-integer number of samples per
-        period does not bias the fundamental.
-
-    Raises
-    ------
-    ValueError
-        If the frequency channel is not positive or the hold holds fewer than
-        ``n_periods`` periods.
-    """
-    start, phi, omega = hold_window(time_s, frequency_hz, n_periods)
-    basis = fourier_basis(phi, harmonics)
-    signals = np.column_stack([excitation_velocity[start:], response_velocity[start:]])
-    coef = np.linalg.lstsq(basis, signals, rcond=None)[0]
-    # v = a cos φ + b sin φ = Re((a − ib) e^{iφ})
-    base, relative = coef[1] - 1j * coef[1 + harmonics]
-    if relative == 0 or base == 0:
-        raise ValueError("no measurable response (zero fundamental)")
-    ratio = relative / base
-    phase_error = np.degrees(np.angle(ratio * 1j))  # arg(V/V_b) + 90°, wrapped
-    damping = np.real(-1j * base * np.conj(relative)) / (2 * abs(relative) ** 2)
-    return HoldPoint(
-        amplitude_m=abs(relative) / omega,
-        frequency_hz=omega / (2 * np.pi),
-        damping_ratio=float(damping),
-        phase_error_deg=float(phase_error),
-        periods=n_periods,
-    )
-
-
-def _hold_samples(record: Record, hold: Hold) -> slice:
-    t = record.time_s
-    return slice(np.searchsorted(t, hold.start_s, "left"), np.searchsorted(t, hold.end_s, "right"))
-
-
-def extract_backbone(
-    record: Record, n_periods: int = 70, harmonics: int = 3, strict: bool = True
-) -> Backbone:
-    """Backbone of a record: one point per hold phase of its step schedule.
-
-    Parameters
-    ----------
-    record
-        A phase-resonance record.
-    n_periods
-        Periods at the end of each hold phase used for its point (NLtest uses 70).
-    harmonics
-        Harmonics fitted besides the fundamental (see :func:`hold_point`).
-    strict
-        Hold phases shorter than ``n_periods`` periods raise a ValueError; when
-        False they use their whole periods instead, with a warning.
-
-    Raises
-    ------
-    ValueError
-        Naming the record file and the level of a hold phase that is too short,
-        has no data, a non-positive frequency channel, or a response that is not
-        near phase quadrature with the excitation (|phase error| > 90°, i.e.
-        negative power input: check the channel signs).
-    """
-    for name, value in (("n_periods", n_periods), ("harmonics", harmonics)):
-        if not isinstance(value, int | np.integer) or value < 1:
-            raise ValueError(f"{name} must be an integer ≥ 1, got {value!r}")
-    holds = record.steps.holds()
-    where = record.path or record.name
-    if not holds:
-        raise ValueError(
-            f"{where}: the step schedule {record.steps.source} has no hold phase "
-            "(no two consecutive rows with the same level)"
-        )
-    points, levels = [], []
-    for hold in holds:
-        rows = _hold_samples(record, hold)
-        context = f"{where}: hold phase at level {hold.level:g} ({hold.start_s:g}–{hold.end_s:g} s)"
-        if rows.stop - rows.start < 4 * (2 * harmonics + 1):
-            raise ValueError(f"{context} has too few samples ({rows.stop - rows.start})")
-        args = (
-            record.time_s[rows],
-            record.excitation_velocity[rows],
-            record.response_velocity[rows],
-            record.frequency_hz[rows],
-        )
-        try:
-            point = hold_point(*args, n_periods=n_periods, harmonics=harmonics)
-        except ShortHoldError as exc:
-            whole = int(exc.periods)
-            if strict or whole < 1:
-                raise ValueError(f"{context} {exc}") from None
-            warnings.warn(f"{context} {exc}; using its {whole} whole periods", stacklevel=2)
-            point = hold_point(*args, n_periods=whole, harmonics=harmonics)
-        except ValueError as exc:
-            raise ValueError(f"{context}: {exc}") from None
-        if not (np.isfinite(point.damping_ratio) and point.amplitude_m > 0):
-            raise ValueError(f"{context}: no measurable response (zero fundamental)")
-        if abs(point.phase_error_deg) > 90:
-            raise ValueError(
-                f"{context}: response is {point.phase_error_deg:+.1f}° from phase resonance "
-                "(negative power input): check the signs of the velocity channels"
-            )
-        points.append(point)
-        levels.append(hold.level)
-    return Backbone(
-        amplitude_m=[p.amplitude_m for p in points],
-        frequency_hz=[p.frequency_hz for p in points],
-        damping_ratio=[p.damping_ratio for p in points],
-        excitation_level=levels,
-        phase_error_deg=[p.phase_error_deg for p in points],
-        label=record.name,
-        source=str(where),
-    )
-
-
-def extract_backbones(
-    records: Iterable[Record],
-    n_periods: int = 70,
-    harmonics: int = 3,
-    strict: bool = True,
-    progress: bool = False,
-) -> BackboneSet:
-    """Backbones of every record of a campaign (see :func:`extract_backbone`)."""
-    if progress:
-        from tqdm.auto import tqdm
-
-        records = tqdm(records, desc="backbones", unit="record")
-    return BackboneSet(
-        extract_backbone(r, n_periods=n_periods, harmonics=harmonics, strict=strict)
-        for r in records
-    )
+    response = orders("harmonic")
+    errors = [numbers(f"harmonic{h}_se") for h in response]
+    offset = numbers("mean_offset_mm")
+    return {
+        "harmonics": complex_parts("harmonic", response),
+        "harmonic_standard_error": None
+        if not errors or any(e is None for e in errors)
+        else np.column_stack(errors),
+        "excitation_harmonics": complex_parts("excitation_harmonic", orders("excitation_harmonic")),
+        "mean_offset_m": None if offset is None else 1e-3 * offset,
+    }

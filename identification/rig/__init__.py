@@ -1,10 +1,25 @@
 """The virtual test rig: phase-resonance records of a known ground truth.
 
 :class:`Rig` (:mod:`identification.rig.rig`) simulates and writes records in the
-TRC layout; :mod:`identification.rig.presets` holds the named scenarios.
+TRC layout with the ideal PLL simulator; :class:`LabRig`
+(:mod:`identification.rig.lab`) measures like a laboratory: shaker distortion,
+a rippling multiply-and-low-pass PLL, drift, dropouts
+(:mod:`identification.rig.conditions`) and joint physics outside the catalogue
+(:mod:`identification.rig.joints`). :mod:`identification.rig.presets` holds the
+named scenarios of both.
 """
 
-from identification.rig.presets import HIDDEN_EFFECT_SCENARIOS, RIG_PRESETS, RigPreset
+from typing import Any
+
+from identification.rig.lab import LabAssembly, LabRig
+from identification.rig.presets import (
+    HIDDEN_EFFECT_SCENARIOS,
+    LAB_HIDDEN_SCENARIOS,
+    LAB_NULL_SCENARIOS,
+    LAB_OUT_OF_CATALOGUE_SCENARIOS,
+    RIG_PRESETS,
+    RigPreset,
+)
 from identification.rig.rig import (
     GROUND_TRUTH_FILE,
     RecordTruth,
@@ -15,15 +30,33 @@ from identification.rig.rig import (
     trc_channels,
 )
 
+
+def rig_for_preset(name: str, levels: int = 10, **options: Any) -> Rig:
+    """The rig of a named preset: a :class:`LabRig` for lab scenarios, else a :class:`Rig`.
+
+    ``levels`` is the number of hold phases; other keywords as :meth:`Rig.preset`.
+    """
+    if name not in RIG_PRESETS:
+        raise ValueError(f"unknown rig preset {name!r}; available: {', '.join(RIG_PRESETS)}")
+    engine = LabRig if RIG_PRESETS[name].lab is not None else Rig
+    return engine.preset(name, levels=levels, **options)
+
+
 __all__ = [
     "GROUND_TRUTH_FILE",
     "HIDDEN_EFFECT_SCENARIOS",
+    "LAB_HIDDEN_SCENARIOS",
+    "LAB_NULL_SCENARIOS",
+    "LAB_OUT_OF_CATALOGUE_SCENARIOS",
     "RIG_PRESETS",
+    "LabAssembly",
+    "LabRig",
     "RecordTruth",
     "Rig",
     "RigPreset",
     "first_bending_shape",
     "levels_for_amplitudes",
     "read_ground_truth",
+    "rig_for_preset",
     "trc_channels",
 ]

@@ -38,10 +38,10 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -59,7 +59,6 @@ from identification.measurements.records import (
     write_record,
 )
 from identification.model import JointModel
-from identification.rig.presets import RIG_PRESETS
 
 __all__ = [
     "GROUND_TRUTH_FILE",
@@ -160,6 +159,7 @@ class RecordTruth:
     shaker_gain: float
     noise_m_s: float
     seed: tuple[int, ...]
+    lab: Mapping[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -214,6 +214,9 @@ class Rig:
     hidden_effects: tuple[str, ...] = ()
     pll_options: Mapping[str, Any] = field(default_factory=dict)
 
+    #: Whether the class takes a preset's lab settings (the lab engine does).
+    takes_lab_settings: ClassVar[bool] = False
+
     def __post_init__(self) -> None:
         levels = tuple(float(v) for v in np.atleast_1d(self.levels_v))
         if not levels or not all(math.isfinite(v) and v > 0 for v in levels):
@@ -227,7 +230,7 @@ class Rig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"Rig.{name} must be finite and ≥ 0, got {value}")
-        known = {*self.model.parameter_names, "shaker_gain"}
+        known = set(self._variable_parameters())
         for key, spread in self.variability.items():
             if key not in known:
                 raise ValueError(f"Rig.variability: unknown parameter {key!r}; use {sorted(known)}")
@@ -263,7 +266,7 @@ class Rig:
         amplitude_range_mm: tuple[float, float] = (0.05, 2.0),
         **options: Any,
     ) -> Rig:
-        """A rig from :data:`RIG_PRESETS`.
+        """A rig from :data:`RIG_PRESETS`; lab scenarios: :func:`identification.rig.rig_for_preset`.
 
         Parameters
         ----------
@@ -277,6 +280,8 @@ class Rig:
         **options
             Any other :class:`Rig` field (``hold_s``, ``noise_m_s``, ``variability``, …).
         """
+        from identification.rig.presets import RIG_PRESETS  # presets build on this module
+
         try:
             preset = RIG_PRESETS[name]
         except KeyError:
@@ -289,25 +294,41 @@ class Rig:
                 f"need levels ≥ 1 and 0 < low < high, got {levels}, {amplitude_range_mm}"
             )
         amplitudes = 1e-3 * np.geomspace(low, high, levels)
+        if preset.lab is not None and not cls.takes_lab_settings:
+            raise ValueError(
+                f"rig preset {name!r} is a lab scenario: build it with "
+                "identification.rig.rig_for_preset (or LabRig.preset)"
+            )
         settings = {
             "variability": dict(preset.variability),
             "name": name,
             "description": preset.description,
             "base_model": preset.base_model,
             "hidden_effects": preset.hidden_effects,
+            **(preset.lab or {}),
             **options,
         }
         return cls.for_amplitudes(preset.model, amplitudes, **settings)
 
     # ------------------------------------------------------------ drawing
+    def _variable_parameters(self) -> list[str]:
+        """Names ``variability`` may spread."""
+        return [*self.model.parameter_names, "shaker_gain"]
+
+    def _factors(self, rng: np.random.Generator) -> dict[str, float]:
+        """One lognormal factor per entry of ``variability``, drawn in name order."""
+        return {k: math.exp(s * rng.standard_normal()) for k, s in sorted(self.variability.items())}
+
     def draw(self, rng: np.random.Generator) -> tuple[JointModel, float]:
         """One assembly: the model and shaker gain with their lognormal spreads applied."""
-        factors = {
-            k: math.exp(s * rng.standard_normal()) for k, s in sorted(self.variability.items())
-        }
+        factors = self._factors(rng)
         gain = self.shaker_gain * factors.pop("shaker_gain", 1.0)
         values = {k: self.model.parameters[k] * f for k, f in factors.items()}
         return self.model.with_parameters(values), gain
+
+    def _draw_job(self, rng: np.random.Generator) -> Any:
+        """What :meth:`_simulate_job` needs of one assembly."""
+        return self.draw(rng)
 
     # ------------------------------------------------------------ running
     def steps(self) -> StepSchedule:
@@ -379,6 +400,42 @@ class Rig:
             **options,
         )
 
+    def _jobs(self, assemblies: int, runs: int, seed: int) -> list[tuple]:
+        """``(name, assembly draw, seeds, campaign position)`` of every record, in test order."""
+        if assemblies < 1 or runs < 1:
+            raise ValueError(f"assemblies and runs must be ≥ 1, got {assemblies}, {runs}")
+        jobs = []
+        for a in range(1, assemblies + 1):
+            drawn = self._draw_job(np.random.default_rng([seed, a]))
+            for r in range(1, runs + 1):
+                name = record_name(self.config, a, r if runs > 1 else None)
+                jobs.append((name, drawn, (seed, a, r)))
+        last = max(len(jobs) - 1, 1)
+        return [(*job, i / last) for i, job in enumerate(jobs)]
+
+    def _simulate_job(
+        self, name: str, drawn: Any, seeds: Sequence[int], position: float
+    ) -> tuple[Record, dict[str, Any]]:
+        """One record of a campaign and its ground-truth entry."""
+        model, gain = drawn
+        record = self.simulate(model, gain, np.random.default_rng(list(seeds)), name)
+        truth = {
+            "model": model.to_dict(),
+            "shaker_gain": gain,
+            "noise_m_s": self.noise_m_s,
+            "seed": list(seeds),
+        }
+        return record, truth
+
+    def campaign(
+        self, assemblies: int = 3, runs: int = 1, seed: int = 0
+    ) -> list[tuple[Record, dict[str, Any]]]:
+        """The records of :meth:`write_campaign`, in memory, each with its ground-truth entry.
+
+        The same draws and noise as :meth:`write_campaign` with the same arguments.
+        """
+        return [self._simulate_job(*job) for job in self._jobs(assemblies, runs, seed)]
+
     def write_campaign(
         self,
         folder: str | Path,
@@ -407,15 +464,8 @@ class Rig:
         whatever is on disk when a run stops has its truth beside it; the first
         failure is raised after the records that did finish are accounted for.
         """
-        if assemblies < 1 or runs < 1:
-            raise ValueError(f"assemblies and runs must be ≥ 1, got {assemblies}, {runs}")
         folder = Path(folder)
-        jobs = []
-        for a in range(1, assemblies + 1):
-            model, gain = self.draw(np.random.default_rng([seed, a]))
-            for r in range(1, runs + 1):
-                name = record_name(self.config, a, r if runs > 1 else None)
-                jobs.append((name, model, gain, (seed, a, r)))
+        jobs = self._jobs(assemblies, runs, seed)
         formatting = {"comma": comma, "extension": extension, "precision": precision}
         if executor is None:  # one record in memory at a time, stop at the first failure
             outcomes = (_write_job(self, folder, formatting, *job) for job in jobs)
@@ -428,16 +478,11 @@ class Rig:
             outcomes = tqdm(outcomes, total=len(jobs), desc="rig records", unit="record")
         truth, failure = {}, None
         sidecar = self._sidecar(truth)  # holds ``truth`` itself, which fills below
-        for (name, model, gain, seeds), outcome in zip(jobs, outcomes, strict=True):
+        for job, outcome in zip(jobs, outcomes, strict=True):
             if isinstance(outcome, Exception):
                 failure = failure or outcome
                 continue
-            truth[name] = {
-                "model": model.to_dict(),
-                "shaker_gain": gain,
-                "noise_m_s": self.noise_m_s,
-                "seed": list(seeds),
-            }
+            truth[job[0]] = outcome[1]
             atomic_write_text(folder / GROUND_TRUTH_FILE, json.dumps(sidecar, indent=2))
         if failure is not None:
             raise failure
@@ -468,11 +513,11 @@ class Rig:
 
 
 def _write_job(
-    rig: Rig, folder: Path, formatting: dict, name: str, model: JointModel, gain: float, seeds
-) -> Path:
-    """Simulate and write one record (module level so that executors can pickle it)."""
-    record = rig.simulate(model, gain, np.random.default_rng(list(seeds)), name)
-    return write_record(record, folder, **formatting)
+    rig: Rig, folder: Path, formatting: dict, name: str, drawn: Any, seeds, position: float
+) -> tuple[Path, dict[str, Any]]:
+    """Simulate and write one record; its path and truth (module level: executors pickle it)."""
+    record, truth = rig._simulate_job(name, drawn, seeds, position)
+    return write_record(record, folder, **formatting), truth
 
 
 def _outcome(future) -> Any:
@@ -498,6 +543,7 @@ def read_ground_truth(folder: str | Path) -> dict[str, RecordTruth]:
             shaker_gain=float(entry["shaker_gain"]),
             noise_m_s=float(entry["noise_m_s"]),
             seed=tuple(entry["seed"]),
+            lab=entry.get("lab"),
         )
         for name, entry in data["records"].items()
     }

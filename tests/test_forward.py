@@ -1,4 +1,4 @@
-"""Forward-model Ops: native harmonic-balance graph, ONNX surrogate Op, PLL Op.
+"""Forward models: native harmonic-balance graph, ONNX surrogate Op, PLL Op.
 
 Independent expectations: the numpy single- and multi-harmonic backbones of
 ``identification.analytical.harmonic``, central finite differences, onnxruntime itself,
@@ -20,14 +20,12 @@ from pytensor.graph.replace import vectorize_graph
 
 from identification.analytical.harmonic import backbone
 from identification.analytical.pll import pll_backbones
-from identification.effects import CATALOGUE
 from identification.model import JointModel
-from pm_joint.ops import (
+from pm_joint.forward import (
     BACKBONE_COLUMNS,
-    HarmonicBalanceOp,
+    HarmonicBalanceGraph,
     PLLOp,
     SurrogateOp,
-    describing_graph,
     forward_model,
     harmonic_backbone_graph,
     surrogate_graph,
@@ -89,19 +87,6 @@ def _compiled(model, names, amplitudes=AMPLITUDES_M):
 # -- harmonic balance as a pytensor graph --------------------------------------
 
 
-@pytest.mark.parametrize("effect", list(CATALOGUE))
-def test_describing_graph_matches_the_catalogue(effect):
-    a = np.geomspace(1e-6, 5e-3, 9)[:, None]
-    omega = np.array([250.0, 630.0, 1100.0])
-    shape = {n: 1.7 * v for n, v in CATALOGUE[effect].defaults.items()}  # not the defaults
-    k_want, c_want = CATALOGUE[effect].describing(a, omega, **shape)
-    k_got, c_got = (v.eval(mode=MATH) for v in describing_graph(effect, a, omega, **shape))
-    # Damping compared as the force it gives (c·ω, a stiffness), on the effect's scale.
-    scale = np.abs(k_want).max() + np.abs(c_want * omega).max()
-    np.testing.assert_allclose(k_got, k_want, rtol=1e-12, atol=1e-14 * scale)
-    np.testing.assert_allclose(c_got * omega, c_want * omega, rtol=1e-12, atol=1e-14 * scale)
-
-
 @pytest.mark.parametrize("name", list(MODELS))
 def test_graph_equals_the_single_harmonic_backbone(name):
     model = MODELS[name]
@@ -145,7 +130,7 @@ def test_graph_gradient_equals_central_differences(name):
 def test_graph_broadcasts_over_leading_axes_and_parameter_subsets():
     names = ["cubic_stiffness", "microslip.F_s"]  # any order, any subset
     values = np.array([[[2e10, 2.0], [1e10, 3.0]], [[3e10, 1.0], [2.5e10, 2.5]]])
-    op = HarmonicBalanceOp(DUFFING_FRICTION, names, AMPLITUDES_M)
+    op = HarmonicBalanceGraph(DUFFING_FRICTION, names, AMPLITUDES_M)
     out = op(pt.as_tensor(values)).eval(mode=MATH)
     expected = backbone(
         DUFFING_FRICTION, AMPLITUDES_M, parameters=values.reshape(-1, 2), names=names
@@ -168,12 +153,14 @@ def test_graph_gives_nan_not_errors_where_there_is_no_backbone():
     cost = pt.sum(pt.switch(pt.isnan(graph[:, 1]), 0.0, graph[:, 1]))
     assert np.isfinite(pytensor.grad(cost, theta).eval({theta: point}, mode=MATH)).all()
     # A shape parameter ≤ 0 makes the whole row NaN instead of raising.
-    bad = HarmonicBalanceOp(DUFFING_FRICTION, ["microslip.k_t"], AMPLITUDES_M)
+    bad = HarmonicBalanceGraph(DUFFING_FRICTION, ["microslip.k_t"], AMPLITUDES_M)
     assert np.isnan(bad(pt.as_tensor([-1.0])).eval(mode=MATH)[:, 1:]).all()
 
 
 def test_nuts_samples_through_the_graph():
-    op = HarmonicBalanceOp(DUFFING_FRICTION, ["linear_stiffness", "cubic_stiffness"], AMPLITUDES_M)
+    op = HarmonicBalanceGraph(
+        DUFFING_FRICTION, ["linear_stiffness", "cubic_stiffness"], AMPLITUDES_M
+    )
     truth = backbone(DUFFING_FRICTION, AMPLITUDES_M).frequency_hz
     with pm.Model() as model:
         k = pm.Uniform("k", 3.5e5, 4.5e5)
@@ -368,7 +355,7 @@ def test_forward_model_switches_and_the_models_agree(tiny, pll_run):
         "surrogate": forward_model("surrogate", None, PLL_NAMES, surrogate=runtime),
     }
     assert {k: type(v) for k, v in kinds.items()} == {
-        "harmonic": HarmonicBalanceOp, "pll": PLLOp, "surrogate": SurrogateOp
+        "harmonic": HarmonicBalanceGraph, "pll": PLLOp, "surrogate": SurrogateOp
     }  # fmt: skip
     for op in kinds.values():
         assert op.parameter_names == tuple(PLL_NAMES)

@@ -5,16 +5,13 @@ and shape parameters such as ``microslip.k_t`` or ``stribeck_friction.v_s``) are
 fitted by least squares (:func:`scipy.optimize.least_squares`) so that its
 harmonic-balance backbone (:func:`identification.analytical.harmonic.backbone`) meets the
 measured ones in **both** channels: friction shows in the damping, stiffness in
-the frequency. With test records, the higher harmonics of the response are a
-third channel (:func:`extract_harmonics`): even terms such as ``x²`` leave a
-second harmonic, ``x³`` a third, where the backbone alone cannot tell them apart.
+the frequency. Backbones that carry the higher harmonics of their hold fits add
+them as a third channel (:mod:`identification.fitting.data`).
 
-Residuals are normalised per amplitude level by the measured scatter across
-curves (assembly-to-assembly variability), combined with a stated noise floor
-(:data:`NOISE_FLOOR`), so a population-mean model is judged against the
-spread the test itself shows. The log-likelihood is that of independent
-Gaussian residuals with those standard deviations; AIC and BIC count the fitted
-parameters.
+Residuals are normalised by the standard deviations of
+:class:`~identification.fitting.data.FitData` (scatter across curves ⊕ noise
+floor). The log-likelihood is that of independent Gaussian residuals with those
+standard deviations; AIC and BIC count the fitted parameters.
 
 Start values come from a linearised fit: for fixed shape parameters the
 single-harmonic balance is *linear* in the coefficients when evaluated at the
@@ -28,8 +25,7 @@ from __future__ import annotations
 
 import itertools
 import math
-import warnings
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,433 +33,30 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
-from identification.analytical.harmonic import backbone
-from identification.effects import CATALOGUE, get_effect
-from identification.measurements.backbone import (
-    BackboneSet,
-    ShortHoldError,
-    fourier_basis,
-    hold_window,
+from identification.effects import CATALOGUE, FitScale, get_effect
+from identification.fitting.data import (
+    BACKBONE_CHANNELS,
+    HARMONIC_CHANNELS,
+    FitData,
+    _floor_key,
+    fit_data,
 )
-from identification.measurements.records import Record
+from identification.fitting.prediction import predict_channels, resolve_method
+from identification.measurements.backbone import BackboneSet
 from identification.model import JointModel
 
 __all__ = [
-    "BACKBONE_CHANNELS",
-    "HARMONIC_CHANNELS",
-    "NOISE_FLOOR",
-    "FitData",
     "FitResult",
-    "HoldHarmonics",
     "default_free",
     "default_shape_grid",
     "evaluate",
-    "extract_harmonics",
     "fit_backbones",
-    "fit_data",
-    "measurement_levels",
-    "predict_channels",
-    "resolve_method",
+    "fit_scale",
     "shape_bounds",
 ]
 
-#: Backbone channels: frequency (Hz) and power-balance damping ratio.
-BACKBONE_CHANNELS = ("frequency_hz", "damping_ratio")
-#: Higher-harmonic channels from test records: ``C_h/a`` and ``S_h/a`` of the relative
-#: displacement ``x = a cos θ + Σ_h C_h cos hθ + S_h sin hθ`` (fractions of the fundamental).
-HARMONIC_ORDERS = (2, 3)
-HARMONIC_CHANNELS = tuple(f"harmonic{h}_{part}" for h in HARMONIC_ORDERS for part in ("cos", "sin"))
-#: Noise floors combined with the measured scatter: frequency (Hz), damping ratio (1),
-#: harmonics (fraction of the fundamental). The harmonics floor stands for what a real
-#: rig adds (shaker distortion, sensor nonlinearity) beyond the fit's standard error.
-NOISE_FLOOR = {"frequency_hz": 0.02, "damping_ratio": 2e-5, "harmonics": 1e-3}
-#: Harmonics balanced by ``method="multi"``.
-N_HARMONICS = 5
 #: Normalised residual given to a point where the model has no backbone (HB failure).
 _FAILED_RESIDUAL = 1e3
-
-
-def _floor_key(channel: str) -> str:
-    return "harmonics" if channel.startswith("harmonic") else channel
-
-
-# --------------------------------------------------------------------------
-# Higher harmonics of test records
-
-
-@dataclass(frozen=True)
-class HoldHarmonics:
-    """Higher harmonics of the relative displacement, one row per hold phase of a record.
-
-    Attributes
-    ----------
-    label
-        Record name (the backbone curve's label).
-    amplitude_m
-        Fundamental amplitude ``|Q_1|`` (m).
-    relative
-        ``(n_holds, len(HARMONIC_ORDERS))`` complex ``Q_h e^{-ih arg Q_1} / |Q_1|``: the
-        harmonic in the frame where the fundamental is ``a cos θ``, so that its real
-        part is ``C_h/a`` and minus its imaginary part ``S_h/a``.
-    standard_error
-        Standard error of each real component of ``relative`` (from the fit residual).
-    """
-
-    label: str
-    amplitude_m: np.ndarray
-    relative: np.ndarray
-    standard_error: np.ndarray
-
-
-def _hold_harmonics(
-    time_s: np.ndarray,
-    response_velocity: np.ndarray,
-    frequency_hz: np.ndarray,
-    n_periods: int,
-    harmonics: int,
-) -> tuple[float, np.ndarray, np.ndarray]:
-    """Fundamental amplitude, relative harmonics and their standard errors of one hold.
-
-    The window of :func:`identification.measurements.backbone.hold_window` (the one backbone
-    points use), a constant plus ``harmonics`` harmonics fitted to the velocity.
-    The displacement's mean is not observable from velocities, so only ``h ≥ 1``.
-    """
-    try:
-        start, phi, omega = hold_window(time_s, frequency_hz, n_periods)
-    except ShortHoldError as short:  # use the whole periods there are
-        if short.periods < 1:
-            raise ValueError("the hold phase is shorter than one period") from None
-        start, phi, omega = hold_window(time_s, frequency_hz, int(short.periods))
-    k = np.arange(1, harmonics + 1)
-    basis = fourier_basis(phi, harmonics)
-    coef, *_ = np.linalg.lstsq(basis, response_velocity[start:], rcond=None)
-    dof = max(phi.size - basis.shape[1], 1)
-    variance = np.sum((response_velocity[start:] - basis @ coef) ** 2) / dof
-    se_velocity = np.sqrt(variance * np.diag(np.linalg.inv(basis.T @ basis)))[1 : 1 + harmonics]
-    velocity = coef[1 : 1 + harmonics] - 1j * coef[1 + harmonics :]  # v = Re(V e^{ihφ})
-    displacement = velocity / (1j * k * omega)
-    rotated = displacement * np.exp(-1j * k * np.angle(displacement[0]))
-    amplitude = abs(displacement[0])
-    return amplitude, rotated[1:] / amplitude, se_velocity[1:] / (k[1:] * omega * amplitude)
-
-
-def extract_harmonics(records: Iterable[Record], n_periods: int = 70) -> dict[str, HoldHarmonics]:
-    """Second and third harmonics of every hold phase of every record, by record name.
-
-    Uses the same hold phases and window as
-    :func:`identification.measurements.backbone.extract_backbone` (a hold shorter than
-    ``n_periods`` uses its whole periods), so row ``i`` belongs to backbone point ``i``.
-    """
-    out = {}
-    for record in records:
-        rows = []
-        where = record.path or record.name
-        for hold in record.steps.holds():
-            t = record.time_s
-            window = slice(
-                np.searchsorted(t, hold.start_s), np.searchsorted(t, hold.end_s, "right")
-            )
-            try:
-                rows.append(
-                    _hold_harmonics(
-                        t[window],
-                        record.response_velocity[window],
-                        record.frequency_hz[window],
-                        n_periods,
-                        max(HARMONIC_ORDERS),
-                    )
-                )
-            except ValueError as exc:
-                raise ValueError(f"{where}: hold phase at level {hold.level:g}: {exc}") from None
-        if not rows:
-            raise ValueError(f"{where}: no hold phase in the step schedule")
-        out[record.name] = HoldHarmonics(
-            label=record.name,
-            amplitude_m=np.array([r[0] for r in rows]),
-            relative=np.array([r[1] for r in rows]),
-            standard_error=np.array([r[2] for r in rows]),
-        )
-    return out
-
-
-# --------------------------------------------------------------------------
-# Measured data in fitting form
-
-
-def measurement_levels(measured: BackboneSet) -> np.ndarray:
-    """Amplitude levels (m) where measured and predicted backbones are compared.
-
-    Quantiles of the measured amplitudes inside the range every curve shares, as
-    many as a curve has points there: the levels follow the test's own spacing
-    (geometric steps put many levels at small amplitudes, where friction acts).
-
-    Raises
-    ------
-    ValueError
-        If a curve has fewer than 3 points in the shared range (too sparse to compare).
-    """
-    low, high = measured.common_range()
-    counts, pooled = [], []
-    for curve in measured:
-        a = curve.amplitude_m
-        inside = a[(a >= low * (1 - 1e-12)) & (a <= high * (1 + 1e-12))]
-        if np.unique(inside).size < 3:
-            raise ValueError(
-                f"curve {curve.label!r} has {np.unique(inside).size} backbone point(s) in the "
-                f"range all curves share ({1e3 * low:.4g}–{1e3 * high:.4g} mm); at least 3 are "
-                "needed to compare model and measurement"
-            )
-        counts.append(np.unique(inside).size)
-        pooled.append(inside)
-    n = int(np.clip(np.median(counts), 3, 41))
-    levels = np.quantile(np.concatenate(pooled), np.linspace(0.0, 1.0, n))
-    return np.unique(np.clip(levels, low, high))
-
-
-@dataclass(frozen=True)
-class FitData:
-    """Measured points of several curves, with the standard deviation of each value.
-
-    Attributes
-    ----------
-    labels
-        Curve labels.
-    curve
-        ``(n_points,)`` index into ``labels`` of each point.
-    amplitude_m
-        ``(n_points,)`` fundamental amplitudes (m).
-    channels
-        Channel names (:data:`BACKBONE_CHANNELS`, then :data:`HARMONIC_CHANNELS` with records).
-    values
-        ``(n_points, n_channels)`` measured values; NaN where a curve lacks a channel.
-    sigma
-        ``(n_points, n_channels)`` standard deviation: scatter across curves at that
-        amplitude combined with the noise floor (and, for harmonics, the fit's error).
-    levels_m
-        Amplitude levels of the comparison (:func:`measurement_levels`).
-    level_sigma
-        ``(n_levels, n_channels)`` scatter across curves ⊕ noise floor at the levels.
-    standard_error
-        ``(n_points, n_channels)`` standard error of each measured value where known
-        (record harmonics), else 0.
-    noise_floor
-        The noise floors used (:data:`NOISE_FLOOR` keys).
-    """
-
-    labels: tuple[str, ...]
-    curve: np.ndarray
-    amplitude_m: np.ndarray
-    channels: tuple[str, ...]
-    values: np.ndarray
-    sigma: np.ndarray
-    levels_m: np.ndarray
-    level_sigma: np.ndarray
-
-    standard_error: np.ndarray
-    noise_floor: Mapping[str, float]
-
-    @property
-    def n_points(self) -> int:
-        return self.amplitude_m.size
-
-    @property
-    def has_harmonics(self) -> bool:
-        return any(c in HARMONIC_CHANNELS for c in self.channels)
-
-    def column(self, channel: str) -> int:
-        return self.channels.index(channel)
-
-    def at_levels(self, per_point: np.ndarray) -> np.ndarray:
-        """``(n_curves, n_levels, n_channels)`` per-point values interpolated to the levels."""
-        return _at_levels(len(self.labels), self.curve, self.amplitude_m, self.levels_m, per_point)
-
-    def level_mean(self, per_point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Mean over curves at the levels ``(n_levels, n_channels)`` and its standard error."""
-        values = self.at_levels(per_point)
-        count = np.sum(np.isfinite(values), axis=0)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # channels no curve has
-            mean = np.nanmean(values, axis=0)
-        return mean, self.level_sigma / np.sqrt(np.maximum(count, 1))
-
-    def subset(self, index: int) -> FitData:
-        """The data of curve ``index`` alone (its standard deviations from the noise floor)."""
-        rows = self.curve == index
-        return _assemble(
-            (self.labels[index],),
-            np.zeros(rows.sum(), dtype=int),
-            self.amplitude_m[rows],
-            self.channels,
-            self.values[rows],
-            self.standard_error[rows],
-            self.levels_m,
-            self.noise_floor,
-        )
-
-
-def _at_levels(
-    n_curves: int, curve: np.ndarray, amplitude: np.ndarray, levels: np.ndarray, per_point
-) -> np.ndarray:
-    """Per-point values of each curve interpolated to the levels, linear in log-amplitude.
-
-    Points at equal amplitude are averaged; NaN where a curve lacks the channel or
-    does not reach a level.
-    """
-    out = np.full((n_curves, levels.size, per_point.shape[1]), np.nan)
-    log_levels = np.log(levels)
-    for i in range(n_curves):
-        rows = curve == i
-        unique, inverse = np.unique(amplitude[rows], return_inverse=True)
-        if unique.size < 2:
-            continue
-        counts = np.bincount(inverse)
-        inside = (levels >= unique[0] * (1 - 1e-12)) & (levels <= unique[-1] * (1 + 1e-12))
-        for j in range(per_point.shape[1]):
-            column = per_point[rows, j]
-            if not np.isfinite(column).all():
-                continue
-            mean = np.bincount(inverse, weights=column) / counts
-            out[i, inside, j] = np.interp(log_levels[inside], np.log(unique), mean)
-    return out
-
-
-def fit_data(
-    measured: BackboneSet,
-    harmonics: Mapping[str, HoldHarmonics] | None = None,
-    noise_floor: Mapping[str, float] | None = None,
-) -> FitData:
-    """Measured backbones (and record harmonics) in fitting form.
-
-    Parameters
-    ----------
-    measured
-        The measured backbones.
-    harmonics
-        :func:`extract_harmonics` of the curves' records, by label; every curve must
-        have its entry, with one row per backbone point.
-    noise_floor
-        Overrides of :data:`NOISE_FLOOR` (keys ``frequency_hz``, ``damping_ratio``,
-        ``harmonics``).
-    """
-    if not isinstance(measured, BackboneSet) or len(measured) == 0:
-        raise ValueError("measured must be a non-empty BackboneSet")
-    floor = dict(NOISE_FLOOR)
-    for key, value in (noise_floor or {}).items():
-        if key not in floor:
-            raise ValueError(f"unknown noise_floor key {key!r}; use {sorted(floor)}")
-        if not (math.isfinite(value) and value > 0):
-            raise ValueError(f"noise_floor[{key!r}] must be finite and > 0, got {value}")
-        floor[key] = float(value)
-    channels = BACKBONE_CHANNELS + (HARMONIC_CHANNELS if harmonics else ())
-    curve, amplitude, values, errors = [], [], [], []
-    for i, b in enumerate(measured):
-        block = np.full((len(b), len(channels)), np.nan)
-        se = np.zeros_like(block)
-        block[:, 0], block[:, 1] = b.frequency_hz, b.damping_ratio
-        if harmonics:
-            if b.label not in harmonics:
-                raise ValueError(
-                    f"no record harmonics for curve {b.label!r} (records: {sorted(harmonics)})"
-                )
-            h = harmonics[b.label]
-            if h.amplitude_m.size != len(b):
-                raise ValueError(
-                    f"curve {b.label!r}: {len(b)} backbone points but {h.amplitude_m.size} hold "
-                    "phases in its record (extract both with the same n_periods)"
-                )
-            parts = np.stack([h.relative.real, -h.relative.imag], axis=-1).reshape(len(b), -1)
-            block[:, 2:] = parts
-            se[:, 2:] = np.repeat(h.standard_error, 2, axis=1)
-        curve.append(np.full(len(b), i))
-        amplitude.append(b.amplitude_m)
-        values.append(block)
-        errors.append(se)
-    if any((a <= 0).any() for a in amplitude):
-        raise ValueError("measured backbones have points of zero amplitude")
-    return _assemble(
-        tuple(measured.labels),
-        np.concatenate(curve),
-        np.concatenate(amplitude),
-        channels,
-        np.vstack(values),
-        np.vstack(errors),
-        measurement_levels(measured),
-        floor,
-    )
-
-
-def _assemble(labels, curve, amplitude, channels, values, errors, levels, floor) -> FitData:
-    """FitData with the scatter across curves at the levels and per point."""
-    at_levels = _at_levels(len(labels), curve, amplitude, levels, values)
-    floors = np.array([floor[_floor_key(c)] for c in channels])
-    scatter = np.zeros((levels.size, len(channels)))
-    if len(labels) > 1:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # channels fewer than two curves have
-            scatter = np.nan_to_num(np.nanstd(at_levels, axis=0, ddof=1))
-    level_sigma = np.hypot(scatter, floors)
-    point_scatter = np.column_stack(
-        [np.interp(np.log(amplitude), np.log(levels), scatter[:, j]) for j in range(len(channels))]
-    )
-    sigma = np.sqrt(point_scatter**2 + floors**2 + errors**2)
-    return FitData(
-        labels, curve, amplitude, channels, values, sigma, levels, level_sigma, errors, floor
-    )
-
-
-# --------------------------------------------------------------------------
-# Model predictions in the channel layout
-
-
-def resolve_method(method: str, model: JointModel, data: FitData | None = None) -> str:
-    """``"auto"``: multi-harmonic balance when the model has even terms or the data
-    harmonics, else the (much faster) single-harmonic balance."""
-    if method == "auto":
-        even = any(CATALOGUE[e].parity != "odd" for e in model.effects)
-        return "multi" if even or (data is not None and data.has_harmonics) else "single"
-    if method not in ("single", "multi"):
-        raise ValueError(f"method must be 'auto', 'single' or 'multi', got {method!r}")
-    if method == "single" and data is not None and data.has_harmonics:
-        raise ValueError("record harmonics need method='multi' (or 'auto')")
-    return method
-
-
-def predict_channels(
-    model: JointModel,
-    amplitude_m: ArrayLike,
-    channels: Sequence[str] = BACKBONE_CHANNELS,
-    *,
-    method: str = "single",
-    parameters: ArrayLike | None = None,
-    names: Sequence[str] | None = None,
-) -> np.ndarray:
-    """Model prediction of each channel at the given amplitudes.
-
-    Returns ``(n_points, n_channels)``, or ``(n_sets, n_points, n_channels)`` with
-    ``parameters`` (see :func:`identification.analytical.harmonic.backbone`); NaN where the
-    harmonic balance has no solution.
-    """
-    a = np.asarray(amplitude_m, dtype=float)
-    unique, inverse = np.unique(a, return_inverse=True)
-    harmonic_channels = [c for c in channels if c in HARMONIC_CHANNELS]
-    if harmonic_channels and method != "multi":
-        raise ValueError(f"channels {harmonic_channels} need method='multi'")
-    result = backbone(
-        model, unique, parameters=parameters, names=names, method=method, harmonics=N_HARMONICS
-    )
-    columns = []
-    for channel in channels:
-        if channel == "frequency_hz":
-            columns.append(result.frequency_hz)
-        elif channel == "damping_ratio":
-            columns.append(result.damping_ratio)
-        elif channel in HARMONIC_CHANNELS:
-            order, part = int(channel[len("harmonic")]), channel.rsplit("_", 1)[1]
-            table = result.harmonics_cos_m if part == "cos" else result.harmonics_sin_m
-            columns.append(table[..., order] / unique)
-        else:
-            raise ValueError(f"unknown channel {channel!r}")
-    return np.stack(columns, axis=-1)[..., inverse, :]
 
 
 # --------------------------------------------------------------------------
@@ -544,7 +137,7 @@ class FitResult:
     @property
     def harmonic_rmse(self) -> float | None:
         """RMS over the levels of the mean harmonic residual ``|ΔQ_2|, |ΔQ_3|`` combined
-        (fraction of the fundamental); None without record harmonics."""
+        (fraction of the fundamental); None without measured harmonics."""
         return self._rmse(HARMONIC_CHANNELS)
 
     @property
@@ -686,26 +279,24 @@ def _natural_coefficient(effect: str, amplitude_m: float, omega: float, stiffnes
     return stiffness * amplitude_m / peak if peak > 0 else 1.0
 
 
+def fit_scale(model: JointModel, data: FitData) -> FitScale:
+    """The test's scale, from which each effect sets its shape grids and bounds.
+
+    The stiffness is the model's small-amplitude one, or ``(2π f_median)²`` of
+    the data where the model has none.
+    """
+    frequency = data.values[:, data.column("frequency_hz")]
+    return FitScale.from_measurements(data.amplitude_m, frequency, _stiffness(model, data))
+
+
 def default_shape_grid(effect: str, data: FitData, model: JointModel) -> dict[str, np.ndarray]:
     """Shape-parameter values scanned for the start of a newly added effect.
 
-    Spans the measured amplitude (or velocity) range, so that e.g. the slip onset
-    of microslip or the Stribeck velocity can fall anywhere in the test.
+    Each effect spans the measured amplitude (or velocity) range with its own
+    grid (:meth:`identification.effects.Effect.shape_grid`), so that e.g. the
+    slip onset of microslip or the Stribeck velocity can fall anywhere in the test.
     """
-    a_lo, a_hi = data.amplitude_m.min(), data.amplitude_m.max()
-    f = data.values[:, data.column("frequency_hz")]
-    v_lo, v_hi = a_lo * 2 * np.pi * f.min(), a_hi * 2 * np.pi * f.max()
-    if effect == "microslip":
-        # The linear solve fits the coefficient, so only the slip amplitude F_s/k_t matters.
-        k_ref = 0.1 * _stiffness(model, data)
-        return {"k_t": np.array([k_ref]), "F_s": k_ref * np.geomspace(a_lo / 2, a_hi, 16)}
-    if effect == "stribeck_friction":
-        return {"v_s": np.geomspace(v_lo / 3, 10 * v_hi, 16)}
-    if effect == "tanh_saturation":
-        return {"x_s": np.geomspace(a_lo / 3, 10 * a_hi, 16)}
-    if effect == "exponential":
-        return {"x_s": np.geomspace(a_hi / 3, 30 * a_hi, 16)}
-    return {}
+    return get_effect(effect).shape_grid(fit_scale(model, data))
 
 
 def shape_bounds(name: str, data: FitData, model: JointModel) -> tuple[float, float]:
@@ -713,21 +304,14 @@ def shape_bounds(name: str, data: FitData, model: JointModel) -> tuple[float, fl
 
     A shape far outside what the test resolves lets the fit exploit numerics, not
     physics (e.g. a Stribeck velocity far below the smallest response velocity
-    makes a force spike the harmonic balance's time grid cannot resolve).
+    makes a force spike the harmonic balance's time grid cannot resolve). Each
+    effect states its own (:meth:`identification.effects.Effect.shape_bounds`);
+    a parameter it does not bound may move by e^±30.
     """
-    a_lo, a_hi = data.amplitude_m.min(), data.amplitude_m.max()
-    f = data.values[:, data.column("frequency_hz")]
-    v_lo, v_hi = a_lo * 2 * np.pi * f.min(), a_hi * 2 * np.pi * f.max()
-    k = _stiffness(model, data)
-    bounds = {
-        "stribeck_friction.v_s": (v_lo / 10, 100 * v_hi),
-        "tanh_saturation.x_s": (a_lo / 10, 100 * a_hi),
-        "exponential.x_s": (a_hi / 10, 1e3 * a_hi),
-        "microslip.k_t": (1e-4 * k, 10 * k),
-        "microslip.F_s": (1e-5 * k * a_lo, 100 * k * a_hi),
-    }
+    effect, _, shape = name.partition(".")
+    bounds = get_effect(effect).shape_bounds(fit_scale(model, data))
     value = model.parameters[name]
-    return bounds.get(name, (value * math.exp(-30), value * math.exp(30)))
+    return bounds.get(shape, (value * math.exp(-30), value * math.exp(30)))
 
 
 def _stiffness(model: JointModel, data: FitData) -> float:
@@ -847,7 +431,6 @@ def fit_backbones(
     method: str = "auto",
     weights: Mapping[str, float] | None = None,
     shape_scan: Mapping[str, ArrayLike] | None = None,
-    harmonics: Mapping[str, HoldHarmonics] | None = None,
     noise_floor: Mapping[str, float] | None = None,
     per_curve: bool = False,
 ) -> FitResult | list[FitResult]:
@@ -861,7 +444,8 @@ def fit_backbones(
         parameters (:func:`default_shape_grid`), or, for even effects, from a
         scan of its coefficient.
     measured
-        Measured backbones (or a ready :class:`FitData`).
+        Measured backbones (or a ready :class:`FitData`); the harmonics they carry
+        are fitted as a third channel.
     free
         Parameters to fit; default :func:`default_free`.
     method
@@ -872,8 +456,6 @@ def fit_backbones(
     shape_scan
         Grids of shape parameters for the start, by parameter name
         (``{"microslip.F_s": [...]}``); the product of the grids is scanned.
-    harmonics
-        Record harmonics (:func:`extract_harmonics`) fitted as a third channel.
     noise_floor
         Overrides of :data:`NOISE_FLOOR`.
     per_curve
@@ -883,7 +465,7 @@ def fit_backbones(
     -------
     FitResult, or a list of them with ``per_curve``.
     """
-    data = measured if isinstance(measured, FitData) else fit_data(measured, harmonics, noise_floor)
+    data = measured if isinstance(measured, FitData) else fit_data(measured, noise_floor)
     if per_curve:
         return [
             fit_backbones(model, data.subset(i), free, method=method, weights=weights,

@@ -1,0 +1,274 @@
+"""Identify a joint model from test records: input checks, shape grid, mean-offset iterations.
+
+**Data.** Whole records, ramps and PLL transients included: the equation of
+motion holds at every instant, not only in steady state, so no sample needs to
+be thrown away; only ``edge_periods`` periods at each end, where the zero-phase
+filters ring, are left out. As in the paper, the acceleration comes from the
+velocity channel by central differences and the displacement by the trapezoidal
+rule (:func:`~identification.measurements.signals.kinematics`); both are
+zero-phase, so their small gain errors (``(ωh)²/6`` and ``(ωh)²/12``, 7e-4 and
+3e-4 at 100 Hz and 10 kHz) act on the stiffness and never leak into the
+damping. Several records (assemblies, runs) are fitted jointly: the model is
+then their population model.
+
+**Mean-offset reconstruction.** After each fit the slow offset implied by the
+model's quasi-static balance (:func:`.library.mean_offset`) is added back to the
+displacement and the fit repeated with the same support (``offset_iterations``);
+the iterate with the lowest cross-validated error is kept and its support chosen
+again (:func:`_fit_with_offsets`).
+
+**Shape grid.** Each library of the shape grid (:func:`.library.library_grid`)
+is fitted; an admissible model beats any inadmissible one, then the held-out
+error decides.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from identification.effects import CATALOGUE
+from identification.measurements.signals import Kinematics, kinematics
+from identification.sindy.admissibility import admissible, tested_amplitudes
+from identification.sindy.design import build_design
+from identification.sindy.library import (
+    LibraryTerm,
+    RankDeficientLibraryError,
+    library_grid,
+    library_model,
+    mean_offset,
+    shape_text,
+)
+from identification.sindy.regression import bagged_coefficients
+from identification.sindy.report import Identification
+from identification.sindy.selection import Fit, refit, sparse_fit
+
+
+def record_kinematics(record: Any, **options: Any) -> Kinematics:
+    """Band-limited kinematics of a :class:`~identification.measurements.records.Record`."""
+    return kinematics(record.time_s, record.response_velocity, record.excitation_velocity,
+                      record.frequency_hz, record.sampling_rate_hz, **options)  # fmt: skip
+
+
+def identify(records: Any, effects: Sequence[str], **options: Any) -> Identification:
+    """Identify a joint model from test records (:class:`~.measurements.records.Record`).
+
+    ``records`` is one record or a sequence of them, fitted jointly; all must
+    share one sampling rate. ``options`` are those of :func:`identify_arrays`.
+    """
+    records = [records] if hasattr(records, "response_velocity") else list(records)
+    if not records:
+        raise ValueError("no records given")
+    return identify_arrays(
+        [r.time_s for r in records],
+        [r.response_velocity for r in records],
+        [r.excitation_velocity for r in records],
+        [r.frequency_hz for r in records],
+        effects,
+        labels=[str(r.path or r.name) for r in records],
+        **options,
+    )
+
+
+def identify_arrays(
+    t: ArrayLike | Sequence[ArrayLike],
+    response_velocity: ArrayLike | Sequence[ArrayLike],
+    base_velocity: ArrayLike | Sequence[ArrayLike],
+    frequency_hz: ArrayLike | Sequence[ArrayLike],
+    effects: Sequence[str],
+    *,
+    shapes: Mapping[str, Mapping[str, float | Sequence[float]]] | None = None,
+    threshold: float | Sequence[float] | str | None = "cv",
+    ensemble: bool = False,
+    n_models: int = 20,
+    seed: int = 0,
+    n_folds: int = 5,
+    min_threshold: float = 1e-3,
+    offset_iterations: int = 3,
+    n_harmonics: int = 3,
+    edge_periods: float = 20.0,
+    labels: Sequence[str] | None = None,
+) -> Identification:
+    """Identify a joint model from velocity arrays of one or several records.
+
+    Each data argument is one 1-D array, or a list with one array per record
+    (as in pysindy's multiple trajectories); records are fitted jointly.
+
+    Parameters
+    ----------
+    t
+        Sample times (s), uniformly sampled, one rate for all records.
+    response_velocity
+        Response-point velocity relative to the base (m/s).
+    base_velocity
+        Base (excitation) velocity (m/s).
+    frequency_hz
+        Instantaneous excitation frequency (Hz); sets the pass band.
+    effects
+        Catalogue names of the library columns (e.g. :data:`.library.PAPER_LIBRARY`).
+    shapes
+        Shape parameters per effect, ``{"tanh_saturation": {"x_s": 5e-4}}``; a
+        list of values is scanned and the best-scoring combination kept
+        (``{"microslip": {"k_t": [...], "F_s": [...]}}`` scans a grid).
+    threshold
+        ``"cv"``, ``"bic"`` (see :mod:`.selection`), a fixed group-share
+        threshold (one for both groups, or a ``(conservative, dissipative)``
+        pair), or None for plain least squares on the whole library.
+    ensemble
+        Also bag ``n_models`` STLSQ fits (``pysindy.EnsembleOptimizer``, time
+        samples drawn with replacement, ``seed``) at the chosen thresholds and
+        report per-term inclusion probabilities. Consecutive samples are
+        correlated, so these probabilities are optimistic; the backward
+        elimination after the threshold paths is not repeated per bag.
+    n_folds
+        Cross-validation folds; each takes every ``n_folds``-th block of
+        :data:`.design.CV_BLOCK_PERIODS` periods of every record.
+    min_threshold
+        Lowest threshold tried (a group share).
+    offset_iterations
+        Mean-offset reconstructions (:func:`.library.mean_offset`) after the
+        first fit; 0 disables.
+    n_harmonics, edge_periods
+        Preprocessing (:func:`~identification.measurements.signals.kinematics`).
+    labels
+        Names of the records for error messages (file paths).
+
+    Returns
+    -------
+    Identification
+
+    Raises
+    ------
+    ValueError
+        Unknown effect or shape, records with different sampling rates or
+        non-uniform sampling, records too short, or a rank-deficient library
+        (naming the dependent columns).
+    """
+    channels = [_as_list(c) for c in (t, response_velocity, base_velocity, frequency_hz)]
+    n_records = len(channels[0])
+    if any(len(c) != n_records for c in channels):
+        raise ValueError(
+            "t, response_velocity, base_velocity and frequency_hz must hold the same number "
+            f"of records, got {[len(c) for c in channels]}"
+        )
+    labels = list(labels) if labels is not None else [f"record {i}" for i in range(n_records)]
+    grid = library_grid(effects, shapes)
+    if n_folds < 2:
+        raise ValueError(f"n_folds must be >= 2, got {n_folds}")
+    if not (math.isfinite(min_threshold) and 0 < min_threshold < 1):
+        raise ValueError(f"min_threshold must be in (0, 1), got {min_threshold}")
+    rates = [_sampling_rate(np.asarray(ti, dtype=float), label)
+             for ti, label in zip(channels[0], labels, strict=True)]  # fmt: skip
+    if max(rates) - min(rates) > 1e-6 * max(rates):
+        listing = ", ".join(
+            f"{label}: {rate:.6g} Hz" for label, rate in zip(labels, rates, strict=True)
+        )
+        raise ValueError(f"records have different sampling rates ({listing}); resample first")
+    kins = []
+    for (ti, vi, bi, fi), rate, label in zip(zip(*channels, strict=True), rates, labels,
+                                             strict=True):  # fmt: skip
+        try:
+            kins.append(kinematics(ti, vi, bi, fi, rate, n_harmonics=n_harmonics,
+                                   edge_periods=edge_periods))  # fmt: skip
+        except ValueError as exc:
+            raise ValueError(f"{label}: {exc}") from None
+    n_effective = sum(2 * (k.band_hz[1] - k.band_hz[0]) * (k.valid.stop - k.valid.start)
+                      / k.sampling_rate_hz for k in kins)  # fmt: skip
+    amplitudes_m = tested_amplitudes(kins)
+    selection = dict(threshold=threshold, n_effective=n_effective, min_threshold=min_threshold,
+                     amplitudes_m=amplitudes_m)  # fmt: skip
+    best, refused = None, []
+    for terms in grid:
+        try:
+            candidate = _fit_with_offsets(kins, terms, selection, n_folds, offset_iterations)
+        except RankDeficientLibraryError as exc:
+            if len(grid) == 1:
+                raise
+            refused.append(f"{shape_text(terms)} ({exc})")
+            continue
+        # An admissible model beats any inadmissible one, then the held-out error decides.
+        rank = (not admissible(library_model(terms, candidate[1].coefficients), amplitudes_m),
+                candidate[1].held_out)  # fmt: skip
+        if best is None or rank < best[0]:
+            best = (rank, candidate)
+    if best is None:
+        raise RankDeficientLibraryError("every shape of the grid gives a rank-deficient library: "
+                                        + "; ".join(refused))  # fmt: skip
+    if refused:
+        warnings.warn("shape grid points skipped: " + "; ".join(refused), stacklevel=2)
+    terms, fit, offsets, iterations = best[1]
+    bagged = _bagged(fit, [t.effect for t in terms], n_models, seed) if ensemble else None
+    return Identification.from_fit(kins, terms, fit, offsets, iterations, threshold, bagged)
+
+
+def _as_list(values: Any) -> list[np.ndarray]:
+    """One array per record, from one record's array or a list of records' arrays."""
+    if isinstance(values, np.ndarray) and values.ndim == 1:
+        return [values]
+    values = list(values)
+    if values and np.ndim(values[0]) == 0:  # one record given as a plain list of numbers
+        return [np.asarray(values, dtype=float)]
+    return [np.asarray(v, dtype=float) for v in values]
+
+
+def _sampling_rate(t: np.ndarray, label: str) -> float:
+    """Sampling rate (Hz) of a time axis; ValueError if it is not uniformly sampled."""
+    if t.ndim != 1 or t.size < 3:
+        raise ValueError(f"{label}: t must be 1-D with at least 3 samples")
+    steps = np.diff(t)
+    rate = (t.size - 1) / (t[-1] - t[0])
+    if not np.all(np.isfinite(steps)) or np.any(np.abs(steps * rate - 1) > 1e-3):
+        raise ValueError(f"{label}: t is not uniformly sampled (steps {steps.min():.6g} to "
+                         f"{steps.max():.6g} s)")  # fmt: skip
+    return float(rate)
+
+
+def _fit_with_offsets(
+    kins: Sequence[Kinematics],
+    terms: tuple[LibraryTerm, ...],
+    selection: dict[str, Any],
+    n_folds: int,
+    offset_iterations: int,
+) -> tuple[tuple[LibraryTerm, ...], Fit, list[np.ndarray | None], int]:
+    """Fit, then refit with the mean offset each fit implies; keep the best iterate.
+
+    The support is chosen on the first fit and held while the offset is
+    iterated, and chosen again on the kept design. Iterates are compared by
+    their cross-validated error: the in-sample residual would favour spurious
+    terms that mimic the missing offset. The iteration stops early when the
+    model has no even term (nothing shifts the mean) or its coefficients settle.
+    """
+    offsets: list[np.ndarray | None] = [None] * len(kins)
+    fit = first = sparse_fit(build_design(kins, terms, offsets, n_folds), terms, **selection)
+    best = (fit, offsets, 0)
+    for iteration in range(1, offset_iterations + 1):
+        model = library_model(terms, fit.coefficients)
+        if model.linear_stiffness <= 0 or all(CATALOGUE[e].parity == "odd" for e in model.effects):
+            break
+        offsets = [mean_offset(model, k) for k in kins]
+        previous, fit = fit, refit(build_design(kins, terms, offsets, n_folds), first)
+        if fit.held_out < best[0].held_out:
+            best = (fit, offsets, iteration)
+        if np.allclose(fit.coefficients, previous.coefficients, rtol=1e-3, atol=0):
+            break
+    fit, offsets, iteration = best
+    if iteration:
+        fit = sparse_fit(fit.design, terms, **selection)
+    return terms, fit, offsets, iteration
+
+
+def _bagged(
+    fit: Fit, names: Sequence[str], n_models: int, seed: int
+) -> tuple[dict[str, float], dict[str, float]]:
+    """Inclusion probability and median SI coefficient per term of bagged STLSQ fits."""
+    rows = np.hstack(fit.design.rows) / fit.design.scale[:, None]
+    bagged = bagged_coefficients(rows[:-1].T, rows[-1], fit.design.thresholds(fit.threshold),
+                                 n_models, seed)  # fmt: skip
+    inclusion = dict(zip(names, np.mean(bagged != 0, axis=0).tolist(), strict=True))
+    median = fit.design.model_coefficients(np.median(bagged, axis=0))
+    return inclusion, dict(zip(names, median.tolist(), strict=True))

@@ -1,0 +1,270 @@
+"""The SINDy library: catalogue columns along a record, and how alike they are on the data.
+
+A column is a catalogue effect with fixed shape parameters (:class:`LibraryTerm`);
+a library is a list of them, and a shape grid gives one library per combination
+of scanned shape values (:func:`library_grid`).
+
+**One filter on both sides.** The target ``y = ẍ + a_base`` is band-limited
+(first three harmonics), so every library column passes the same zero-phase
+band-pass before the regression (:func:`design_matrix`). A column's harmonics
+above the band would otherwise have nothing to match (Coulomb's square wave
+keeps only 90 % of its energy in harmonics 1 and 3, which would bias its
+coefficient by about 10 %), and its slow mean (x², ẋ²) nothing to balance.
+
+**Mean offset.** An asymmetric stiffness shifts the mean of the relative
+displacement with the amplitude; velocity data cannot show that offset, and
+without it the cubic term leaks into the quadratic one (a relative bias of about
+``−1.5 c₃ a² / k`` on the quadratic coefficient, with ``c₃`` the cubic one and
+``k`` the linear stiffness: −11 % for a 3 % cubic frequency shift).
+:func:`mean_offset` gives the offset a model implies, to be added back to the
+displacement before the columns are built.
+
+**Collinearity.** Terms that data of this kind cannot tell apart are reported,
+not hidden: ``x²`` and ``ẋ²`` act only through the second harmonic, with a ratio
+``−ω²`` that barely changes over a resonance test (|r| ≈ 0.99–0.9996 in the
+tests); ``x·|x|``, ``x³`` and ``x`` (or ``ẋ·|ẋ|``, ``ẋ³``, ``ẋ``, Coulomb) are
+separated only by their harmonics and by how they scale with amplitude
+(|r| ≈ 0.96–0.97 between x·|x| and x³, and between ẋ·|ẋ| and ẋ³);
+``tanh(x/x_s)`` and ``exp(x/x_s) − 1`` with ``x_s`` above the amplitudes are
+nearly polynomials (|r| ≈ 0.98–0.99 with ``x``). :func:`column_correlation`
+measures it, a :class:`CollinearityWarning` names pairs beyond
+:data:`COLLINEARITY_WARNING`, and :func:`check_rank` refuses a library whose
+columns are linearly dependent.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from identification.effects import CATALOGUE, get_effect
+from identification.measurements.signals import Kinematics, bandpass, lowpass
+from identification.model import JointModel, Term
+
+#: The paper's library: polynomials up to cubic in (x, ẋ) and its joint terms
+#: (every catalogue effect but the hysteretic ``microslip``).
+PAPER_LIBRARY: tuple[str, ...] = tuple(name for name in CATALOGUE if name != "microslip")
+
+#: Every monomial of degree 1 to 3 in (x, ẋ).
+POLYNOMIAL_LIBRARY: tuple[str, ...] = (
+    "linear_stiffness", "viscous_damping", "quadratic_stiffness", "stiffness_damping_coupling",
+    "velocity_squared", "cubic_stiffness", "van_der_pol", "displacement_velocity_squared",
+    "cubic_damping",
+)  # fmt: skip
+
+#: How each catalogue coefficient of the ``pandey2025`` preset reads in the paper's Eq. 3.
+EQ3_SYMBOLS: dict[str, str] = {
+    "linear_stiffness": "k1",
+    "viscous_damping": "k2 + k11",
+    "quadratic_stiffness": "−k3",
+    "stiffness_damping_coupling": "−k4",
+    "velocity_squared": "k5",
+    "cubic_stiffness": "−k6",
+    "displacement_velocity_squared": "−k7",
+    "cubic_damping": "−k8",
+    "abs_stiffness": "−k9",
+    "quadratic_damping": "k10",
+    "van_der_pol": "−k11·k12",
+}
+
+#: The two groups of library columns, each thresholded against its own force.
+GROUPS = ("conservative", "dissipative")
+#: |r| between two library columns above which a :class:`CollinearityWarning` is given.
+COLLINEARITY_WARNING = 0.99
+#: Condition number of the scaled library above which it counts as rank-deficient (the
+#: Gram matrix resolves condition numbers up to about 1e8 in double precision).
+RANK_DEFICIENT = 1e7
+
+
+class CollinearityWarning(UserWarning):
+    """Two library columns are so alike on the data that only their combination is identified."""
+
+
+class RankDeficientLibraryError(ValueError):
+    """Some library columns are linearly dependent on the data (the message names them)."""
+
+
+@dataclass(frozen=True)
+class LibraryTerm:
+    """One library column: a catalogue effect with fixed shape parameters."""
+
+    effect: str
+    shape: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        effect = get_effect(self.effect)
+        values = effect.shape_values(**self.shape)  # validates names and values
+        object.__setattr__(self, "shape", dict(zip(effect.shape, values, strict=False)))
+
+    def feature(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The column ``φ(x, v)`` along a path (the Jenkins force needs the whole path)."""
+        return CATALOGUE[self.effect].feature(x, v, **self.shape)
+
+
+def library_grid(
+    effects: Sequence[str], shapes: Mapping[str, Mapping[str, Any]] | None
+) -> list[tuple[LibraryTerm, ...]]:
+    """Every library of the shape-parameter grid (a scalar shape value is fixed).
+
+    Raises
+    ------
+    ValueError
+        Unknown or repeated effects, shapes for effects outside the library,
+        or shape values that are not a number or a 1-D list of numbers.
+    """
+    if isinstance(effects, str) or len(effects) == 0:
+        raise ValueError(f"effects must be a non-empty list of catalogue names, got {effects!r}")
+    for name in effects:
+        get_effect(name)
+    duplicates = sorted({n for n in effects if list(effects).count(n) > 1})
+    if duplicates:
+        raise ValueError(f"effect(s) {duplicates} appear more than once in the library")
+    shapes = dict(shapes or {})
+    stray = sorted(set(shapes) - set(effects))
+    if stray:
+        raise ValueError(f"shapes given for effect(s) {stray} that are not in the library")
+    axes = []  # (effect, parameter, values)
+    for name, params in shapes.items():
+        for param, values in params.items():
+            values = np.atleast_1d(np.asarray(values, dtype=float))
+            if values.ndim != 1 or values.size == 0:
+                raise ValueError(f"shape {name}.{param} must be a number or a 1-D list of numbers")
+            axes.append((name, param, values))
+    grid = []
+    for combination in itertools.product(*(values for _, _, values in axes)):
+        chosen: dict[str, dict[str, float]] = {}
+        for (name, param, _), value in zip(axes, combination, strict=True):
+            chosen.setdefault(name, {})[param] = float(value)
+        grid.append(tuple(LibraryTerm(name, chosen.get(name, {})) for name in effects))
+    return grid
+
+
+def shape_text(terms: Sequence[LibraryTerm]) -> str:
+    """The shape parameters of a library, as ``effect.param=value`` (for messages)."""
+    return ", ".join(f"{t.effect}.{k}={v:g}" for t in terms for k, v in t.shape.items()
+                     if k != "v_reg") or "default shapes"  # fmt: skip
+
+
+def library_model(terms: Sequence[LibraryTerm], coefficients: np.ndarray) -> JointModel:
+    """The :class:`JointModel` of a library's SI coefficients (model convention; zeros left out)."""
+    return JointModel(
+        [Term(t.effect, float(c), t.shape) for t, c in zip(terms, coefficients, strict=True) if c],
+        name="sindy",
+    )
+
+
+def is_dissipative(term: LibraryTerm) -> bool:
+    """Whether a column is odd in the velocity, ``φ(x, −ẋ) = −φ(x, ẋ)`` (damping-like).
+
+    Such terms reverse with the motion and take energy out; the others (even
+    in ``ẋ``, and the Jenkins element: a stiffness with hysteresis, whose
+    force follows the displacement path) store it. Checked numerically at
+    points covering every sign combination of ``x`` and ``ẋ``.
+    """
+    x = np.linspace(-1e-3, 1e-3, 41)
+    v = 0.2 * np.cos(np.linspace(0.0, 9.0, 41))
+    return bool(np.allclose(term.feature(x, -v), -term.feature(x, v), rtol=1e-9, atol=0))
+
+
+def design_matrix(
+    kin: Kinematics, terms: Sequence[LibraryTerm], offset: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Library columns and target of one record, band-passed like the data.
+
+    Parameters
+    ----------
+    kin
+        Band-limited kinematics of the record
+        (:func:`~identification.measurements.signals.kinematics`).
+    terms
+        Library columns.
+    offset
+        Slow mean of the displacement to add back (:func:`mean_offset`), or None.
+
+    Returns
+    -------
+    theta, y
+        ``(n_valid, n_terms)`` columns and ``(n_valid,)`` absolute acceleration
+        ``ẍ + a_base`` (m/s²) over the valid samples.
+    """
+    rows = design_rows(kin, terms, offset)
+    return rows[:-1].T, rows[-1]
+
+
+def design_rows(
+    kin: Kinematics, terms: Sequence[LibraryTerm], offset: np.ndarray | None
+) -> np.ndarray:
+    """``(n_terms + 1, n_valid)``: the columns of :func:`design_matrix` as rows, then y."""
+    x = kin.displacement if offset is None else kin.displacement + offset
+    rows = np.empty((len(terms) + 1, x.size))
+    for i, term in enumerate(terms):
+        rows[i] = term.feature(x, kin.velocity)
+    # Rows are contiguous in memory, so filtering along the last axis is the fast way.
+    rows[:-1] = bandpass(rows[:-1], kin.sampling_rate_hz, kin.band_hz, axis=-1)
+    rows[-1] = kin.absolute_acceleration
+    return rows[:, kin.valid]
+
+
+def mean_offset(model: JointModel, kin: Kinematics, iterations: int = 3) -> np.ndarray:
+    """Slow mean of the displacement implied by the model's quasi-static balance.
+
+    The band-limited displacement ``x'`` has no slow part, but the true one is
+    ``x' + m(t)`` with ``m`` such that the slow part of the restoring force
+    vanishes: ``slow(f(x' + m, ẋ)) = 0``. Solved by the fixed point
+    ``m ← m − slow(f(x' + m, ẋ)) / k_lin``, with "slow" a low-pass at a quarter
+    of the band's lower edge (far below the fundamental).
+    """
+    k = model.linear_stiffness
+    if k <= 0:
+        raise ValueError(f"model has no positive linear stiffness (k = {k}); no offset defined")
+    cutoff = kin.band_hz[0] / 4
+    offset = np.zeros_like(kin.displacement)
+    for _ in range(iterations):
+        force = model.restoring_force(kin.displacement + offset, kin.velocity)
+        offset = offset - lowpass(force, kin.sampling_rate_hz, cutoff) / k
+    return offset
+
+
+def check_rank(gram: np.ndarray, names: Sequence[str]) -> None:
+    """:class:`RankDeficientLibraryError` naming the columns when the library is rank-deficient.
+
+    ``gram`` is the augmented Gram matrix of ``[Θ | y]``; its last row and column are ignored.
+    """
+    values, vectors = np.linalg.eigh(_unit_columns(gram))
+    singular = np.sqrt(np.clip(values, 0.0, None))  # ascending
+    if singular[0] > singular[-1] / RANK_DEFICIENT:
+        return
+    null = np.abs(vectors[:, 0])
+    involved = [names[i] for i in np.flatnonzero(null > 0.1 * null.max())]
+    condition = singular[-1] / singular[0] if singular[0] > 0 else math.inf
+    raise RankDeficientLibraryError(
+        f"the library is rank-deficient on these records: columns {involved} are linearly "
+        f"dependent (condition number {condition:.3g}); drop all but one of them"
+    )
+
+
+def column_correlation(gram: np.ndarray) -> tuple[np.ndarray, float]:
+    """Column correlations and condition number of the library (unit columns).
+
+    ``gram`` is the augmented Gram matrix of ``[Θ | y]``; its last row and column are ignored.
+    """
+    correlation = _unit_columns(gram)
+    values = np.clip(np.linalg.eigvalsh(correlation), 0.0, None)
+    return correlation, float(np.sqrt(values[-1] / values[0]))
+
+
+def _unit_columns(gram: np.ndarray) -> np.ndarray:
+    """Gram of the library columns scaled to unit norm: their correlation matrix.
+
+    The columns are band-passed, hence zero-mean, so the cosine of the angle
+    between two columns is their Pearson correlation. Unit columns make the
+    condition number independent of how the columns were scaled for the thresholds.
+    """
+    g = gram[:-1, :-1]
+    norms = np.sqrt(np.diag(g))
+    return g / np.outer(norms, norms)

@@ -1,0 +1,105 @@
+"""Forward models for PyMC: ONNX surrogate, harmonic balance, PLL simulator.
+
+Every forward model maps a parameter vector θ of shape ``(..., n_params)``
+(leading batch axes allowed) to a backbone tensor of shape ``(..., n_points, 3)``
+with the columns :data:`BACKBONE_COLUMNS`: amplitude (m), frequency (Hz),
+damping ratio. NaN marks a channel the model does not give (a surrogate trained
+without damping, a PLL level that did not lock) and a parameter vector the
+model cannot evaluate: the forward models never raise on a bad θ mid-chain,
+the likelihood turns NaN into ``logp = -inf``. Each one exposes
+``parameter_names`` (the order of θ) and ``n_points``.
+
+:class:`~pm_joint.forward.surrogate.SurrogateOp`
+    The exported ONNX surrogate on onnxruntime; points are its excitation
+    levels. Gradient: backpropagation through
+    :func:`~pm_joint.forward.surrogate.surrogate_graph`, the same network
+    rebuilt in pytensor from the ONNX initializers.
+:class:`~pm_joint.forward.harmonic.HarmonicBalanceGraph`
+    Builds :func:`~pm_joint.forward.harmonic.harmonic_backbone_graph`, the
+    single-harmonic backbone as a native pytensor graph from the catalogue's
+    describing functions (pytensor differentiates it; NUTS works); points are
+    an amplitude grid.
+:class:`~pm_joint.forward.pll.PLLOp`
+    The time-domain PLL simulator as a black box (no gradient); points are its
+    excitation levels.
+
+:func:`forward_model` picks one by name, so one PyMC model switches between
+them with one argument.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+
+from numpy.typing import ArrayLike
+
+from identification.analytical.pll import PLLConfig
+from identification.model import JointModel
+from pm_joint.forward.base import BACKBONE_COLUMNS
+from pm_joint.forward.harmonic import (
+    HarmonicBalanceGraph,
+    describing_graph,
+    harmonic_backbone_graph,
+)
+from pm_joint.forward.pll import PLLOp
+from pm_joint.forward.surrogate import SurrogateOp, surrogate_graph
+from surrogates.runtime import SurrogateRuntime
+
+__all__ = [
+    "BACKBONE_COLUMNS",
+    "FORWARD_KINDS",
+    "HarmonicBalanceGraph",
+    "PLLOp",
+    "SurrogateOp",
+    "describing_graph",
+    "forward_model",
+    "harmonic_backbone_graph",
+    "surrogate_graph",
+]
+
+#: Names :func:`forward_model` accepts.
+FORWARD_KINDS = ("surrogate", "harmonic", "pll")
+
+
+def forward_model(
+    kind: str,
+    model: JointModel | None,
+    names: Sequence[str] | None = None,
+    *,
+    surrogate: SurrogateRuntime | str | os.PathLike | None = None,
+    amplitudes_m: ArrayLike | None = None,
+    levels: ArrayLike | None = None,
+    config: PLLConfig | None = None,
+) -> SurrogateOp | HarmonicBalanceGraph | PLLOp:
+    """The forward model called ``kind``, all with the same interface.
+
+    Parameters
+    ----------
+    kind
+        ``"surrogate"`` (needs ``surrogate``; ``model`` is not used),
+        ``"harmonic"`` (needs ``amplitudes_m``) or ``"pll"`` (needs ``levels``;
+        ``config`` optional).
+    model
+        The joint model (template of the named parameters).
+    names
+        Order of θ; default the surrogate's or the model's parameter names.
+
+    Returns
+    -------
+    SurrogateOp | HarmonicBalanceGraph | PLLOp
+        Call it on θ ``(..., n_params)`` for a ``(..., n_points, 3)`` backbone.
+    """
+    needs = {"surrogate": "surrogate", "harmonic": "amplitudes_m", "pll": "levels"}
+    if kind not in needs:
+        raise ValueError(f"kind must be one of {FORWARD_KINDS}, got {kind!r}")
+    given = {"surrogate": surrogate, "amplitudes_m": amplitudes_m, "levels": levels}
+    if given[needs[kind]] is None:
+        raise ValueError(f"forward model {kind!r} needs {needs[kind]}=")
+    if kind == "surrogate":
+        return SurrogateOp(surrogate, names)
+    if not isinstance(model, JointModel):
+        raise ValueError(f"forward model {kind!r} needs a JointModel, got {model!r}")
+    if kind == "harmonic":
+        return HarmonicBalanceGraph(model, names, amplitudes_m)
+    return PLLOp(model, names, levels, config)

@@ -1,0 +1,225 @@
+"""The ONNX backbone surrogate as a forward model: :class:`SurrogateOp` and its pytensor twin.
+
+Points are the surrogate's excitation levels. The Op runs the exported network
+on onnxruntime; its gradient is the backpropagation through
+:func:`surrogate_graph`, the same network rebuilt in pytensor from the ONNX
+initializers.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import onnx
+import pytensor.tensor as pt
+from onnx import numpy_helper
+from pytensor.gradient import pullback
+
+from pm_joint.forward.base import BACKBONE_COLUMNS, BackboneOp
+from surrogates.runtime import SurrogateRuntime
+
+__all__ = ["SurrogateOp", "surrogate_graph"]
+
+
+class SurrogateOp(BackboneOp):
+    """The ONNX backbone surrogate as a pytensor Op.
+
+    Points are the surrogate's excitation levels, in level order. Parameter
+    vectors outside the surrogate's training box, or not finite, give NaN rows
+    (counted in :attr:`n_failed`) instead of an error, so a sampler that
+    proposes one mid-chain just rejects it. The gradient is the exact
+    backpropagation through :func:`surrogate_graph` (float64; the forward pass
+    runs in float32 on onnxruntime, so values and gradient agree to ~1e-6).
+    Picklable (the runtime keeps the ONNX bytes and rebuilds its session), for
+    multi-process chains.
+
+    Parameters
+    ----------
+    runtime
+        A :class:`~surrogates.runtime.SurrogateRuntime` or the folder to load one from.
+    names
+        Order of θ; must be a permutation of the runtime's parameter names
+        (default: the runtime's order).
+    """
+
+    def __init__(self, runtime: SurrogateRuntime | str | os.PathLike, names=None) -> None:
+        super().__init__()
+        if isinstance(runtime, str | os.PathLike):
+            runtime = SurrogateRuntime.load(Path(runtime))
+        self.runtime = runtime
+        expected = tuple(runtime.parameter_names)
+        names = expected if names is None else tuple(names)
+        missing = [n for n in expected if n not in names]
+        unexpected = [n for n in names if n not in expected]
+        if missing or unexpected or len(names) != len(expected):
+            raise ValueError(
+                f"names {list(names)} do not match the surrogate's parameters {list(expected)}: "
+                f"missing {missing}, not in the surrogate {unexpected}"
+            )
+        self.parameter_names = names
+        self.n_points = runtime.spec.n_levels
+        self.levels = runtime.levels
+        #: Columns of θ in the runtime's parameter order.
+        self._order = np.array([names.index(n) for n in expected])
+
+    def _backbones(self, flat: np.ndarray) -> np.ndarray:
+        spec = self.runtime.spec
+        parameters = flat[:, self._order]
+        usable = np.isfinite(parameters).all(axis=1)
+        usable[usable] = ~spec.outside_box(parameters[usable])
+        out = np.full((flat.shape[0], self.n_points, 3), np.nan)
+        if usable.any():
+            predicted = self.runtime.predict(parameters[usable], extrapolate="allow")
+            for channel, values in zip(spec.channels, np.moveaxis(predicted, -1, 0), strict=True):
+                out[usable, :, BACKBONE_COLUMNS.index(channel)] = values
+        return out
+
+    def pullback(self, inputs, outputs, cotangents):
+        (theta,) = inputs
+        graph = surrogate_graph(self.runtime, theta[..., self._order])
+        return [pullback(graph, theta, cotangents[0])]
+
+    def __repr__(self) -> str:
+        return f"SurrogateOp({self.runtime!r}, names={list(self.parameter_names)})"
+
+
+# The ONNX surrogate rebuilt in pytensor from its initializers.
+
+
+def surrogate_graph(runtime: SurrogateRuntime, theta: Any) -> pt.TensorVariable:
+    """The surrogate's ONNX graph as a float64 pytensor graph, in the common layout.
+
+    The ONNX nodes are translated one by one (the exported surrogate uses
+    Gemm/MatMul, Elu, Relu, Reshape, 1-D Conv, Transpose and elementwise
+    arithmetic), with the weights read from the initializers, so pytensor can
+    backpropagate through the network. Values equal onnxruntime's up to its
+    float32 rounding.
+
+    Parameters
+    ----------
+    runtime
+        The surrogate.
+    theta
+        ``(..., n_params)`` in the runtime's parameter order.
+
+    Returns
+    -------
+    TensorVariable
+        ``(..., n_levels, 3)``, columns :data:`BACKBONE_COLUMNS`, NaN for a
+        channel the surrogate does not predict. No box check here (that is
+        :class:`SurrogateOp`'s job).
+    """
+    spec = runtime.spec
+    theta = pt.as_tensor_variable(theta).astype("float64")
+    proto = onnx.load_from_string(runtime.model_bytes)
+    values: dict[str, Any] = {
+        init.name: numpy_helper.to_array(init) for init in proto.graph.initializer
+    }
+    (graph_input,) = [i.name for i in proto.graph.input if i.name not in values]
+    values[graph_input] = theta.reshape((-1, spec.n_params))
+    for node in proto.graph.node:
+        translate = _ONNX_NODES.get(node.op_type)
+        if translate is None:
+            raise ValueError(
+                f"{runtime.source}: ONNX node {node.name!r} of type {node.op_type} has no "
+                f"pytensor translation (supported: {', '.join(sorted(_ONNX_NODES))})"
+            )
+        attributes = {a.name: onnx.helper.get_attribute_value(a) for a in node.attribute}
+        inputs = [values[name] if name else None for name in node.input]
+        outputs = translate(inputs, attributes)
+        values.update(zip(node.output, outputs, strict=True))
+    flat = pt.as_tensor_variable(values[proto.graph.output[0].name]).astype("float64")
+    columns = [
+        flat[..., spec.channels.index(c)]
+        if c in spec.channels
+        else pt.full_like(flat[..., 0], np.nan)
+        for c in BACKBONE_COLUMNS
+    ]
+    backbone = pt.stack(columns, axis=-1)
+    return backbone.reshape((*[theta.shape[i] for i in range(theta.ndim - 1)], spec.n_levels, 3))
+
+
+def _as_float64(value: Any) -> Any:
+    """Initializers become float64 constants; pytensor variables pass through."""
+    if isinstance(value, np.ndarray) and np.issubdtype(value.dtype, np.floating):
+        return value.astype(np.float64)
+    return value
+
+
+def _binary(function: Callable) -> Callable:
+    return lambda inputs, _: [function(_as_float64(inputs[0]), _as_float64(inputs[1]))]
+
+
+def _gemm(inputs, attributes):
+    a, b = (_as_float64(x) for x in inputs[:2])
+    a = a.T if attributes.get("transA", 0) else a
+    b = b.T if attributes.get("transB", 0) else b
+    out = attributes.get("alpha", 1.0) * pt.dot(a, b)
+    if len(inputs) > 2 and inputs[2] is not None:
+        out = out + attributes.get("beta", 1.0) * _as_float64(inputs[2])
+    return [out]
+
+
+def _elu(inputs, attributes):
+    x = inputs[0]
+    # expm1 of the clipped argument: the unused branch must not overflow (NaN gradients).
+    return [pt.switch(x > 0, x, attributes.get("alpha", 1.0) * pt.expm1(pt.minimum(x, 0.0)))]
+
+
+def _reshape(inputs, attributes):
+    shape = np.asarray(inputs[1])
+    if not isinstance(inputs[1], np.ndarray) or np.any(shape == 0):
+        raise ValueError(
+            "ONNX Reshape: only constant target shapes without 0 entries are supported"
+        )
+    return [pt.as_tensor_variable(inputs[0]).reshape(tuple(int(s) for s in shape))]
+
+
+def _conv1d(inputs, attributes):
+    """1-D Conv (group 1, stride 1) as a sum of ``kernel_size`` matrix products."""
+    x = pt.as_tensor_variable(inputs[0])
+    weights = _as_float64(inputs[1])
+    if weights.ndim != 3 or attributes.get("group", 1) != 1:
+        raise ValueError("ONNX Conv: only 1-D convolutions with group = 1 are supported")
+    if any(s != 1 for s in attributes.get("strides", [1])):
+        raise ValueError("ONNX Conv: only stride 1 is supported")
+    if attributes.get("auto_pad", b"NOTSET") not in (b"NOTSET", "NOTSET"):
+        raise ValueError("ONNX Conv: auto_pad is not supported; explicit pads only")
+    (dilation,) = attributes.get("dilations", [1])
+    begin, end = attributes.get("pads", [0, 0])
+    kernel = weights.shape[2]
+    padded = pt.pad(x, ((0, 0), (0, 0), (begin, end)))
+    length = x.shape[2] + begin + end - dilation * (kernel - 1)
+    out = sum(
+        pt.tensordot(
+            padded[:, :, k * dilation : k * dilation + length], weights[:, :, k], [[1], [1]]
+        )
+        for k in range(kernel)
+    ).transpose(0, 2, 1)
+    if len(inputs) > 2 and inputs[2] is not None:
+        out = out + _as_float64(inputs[2])[None, :, None]
+    return [out]
+
+
+_ONNX_NODES: dict[str, Callable[[list, dict], list]] = {
+    "Add": _binary(lambda a, b: a + b),
+    "Sub": _binary(lambda a, b: a - b),
+    "Mul": _binary(lambda a, b: a * b),
+    "Div": _binary(lambda a, b: a / b),
+    "MatMul": _binary(pt.matmul),
+    "Gemm": _gemm,
+    "Relu": lambda inputs, _: [pt.maximum(inputs[0], 0.0)],
+    "Elu": _elu,
+    "Tanh": lambda inputs, _: [pt.tanh(inputs[0])],
+    "Identity": lambda inputs, _: [inputs[0]],
+    "Constant": lambda _, attributes: [numpy_helper.to_array(attributes["value"])],
+    "Reshape": _reshape,
+    "Transpose": lambda inputs, attributes: [
+        pt.as_tensor_variable(inputs[0]).transpose(*attributes["perm"])
+    ],
+    "Conv": _conv1d,
+}

@@ -1,0 +1,87 @@
+"""An independent simulator for tests: scipy's DOP853 on forces written as plain Python.
+
+Tests that check pm-joint's extraction, identification or criticism need data that the code under
+test did not make. This module shares nothing with pm-joint (no catalogue kernels, no numba, no
+harmonic balance): forces are Python callables of ``(x, v)`` written in each test, and the
+equations are integrated by :func:`scipy.integrate.solve_ivp` with dense output, then sampled as a
+data acquisition would (fixed rate, optional noise).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+Force = Callable[[float, float], float]
+
+
+def free_decay(
+    force: Force,
+    x0_m: float,
+    v0_m_s: float,
+    *,
+    fs_hz: float = 10_000.0,
+    duration_s: float = 1.0,
+    rtol: float = 1e-10,
+) -> dict[str, np.ndarray]:
+    """Ring-down of ``ẍ + force(x, ẋ) = 0`` from ``(x0, v0)``, sampled at ``fs_hz``.
+
+    Returns the time (s), displacement (m), velocity (m/s) and acceleration (m/s²), the last
+    from the equation of motion (not from differencing).
+    """
+
+    def rhs(_, state):
+        x, v = state
+        return [v, -force(x, v)]
+
+    t = np.arange(round(duration_s * fs_hz)) / fs_hz
+    solution = solve_ivp(
+        rhs, (0.0, t[-1]), [x0_m, v0_m_s], method="DOP853", t_eval=t, rtol=rtol, atol=1e-14
+    )
+    if not solution.success:
+        raise RuntimeError(f"free decay did not integrate: {solution.message}")
+    x, v = solution.y
+    a = -np.array([force(xi, vi) for xi, vi in zip(x, v, strict=True)])
+    return {"time_s": t, "displacement_m": x, "velocity_m_s": v, "acceleration_m_s2": a}
+
+
+def forced_steady_state(
+    force: Force,
+    excitation: Callable[[float], float],
+    period_s: float,
+    *,
+    fs_hz: float = 10_000.0,
+    settle_periods: int = 400,
+    record_periods: int = 50,
+    rtol: float = 1e-10,
+) -> dict[str, np.ndarray]:
+    """Steady response of ``ẍ + force(x, ẋ) = excitation(t)`` after ``settle_periods`` periods.
+
+    The last ``record_periods`` periods are sampled at ``fs_hz`` (time restarts at 0 there).
+    The caller makes sure the transient has died out (light damping needs many periods).
+    """
+
+    def rhs(t, state):
+        x, v = state
+        return [v, excitation(t) - force(x, v)]
+
+    t_settle = settle_periods * period_s
+    first = solve_ivp(rhs, (0.0, t_settle), [0.0, 0.0], method="DOP853", rtol=rtol, atol=1e-14)
+    if not first.success:
+        raise RuntimeError(f"settling did not integrate: {first.message}")
+    n = round(record_periods * period_s * fs_hz)
+    t = t_settle + np.arange(n) / fs_hz
+    second = solve_ivp(
+        rhs, (t_settle, t[-1]), first.y[:, -1], method="DOP853", t_eval=t, rtol=rtol, atol=1e-14
+    )
+    if not second.success:
+        raise RuntimeError(f"recording did not integrate: {second.message}")
+    x, v = second.y
+    return {
+        "time_s": t - t_settle,
+        "displacement_m": x,
+        "velocity_m_s": v,
+        "excitation": np.array([excitation(ti) for ti in t]),
+    }
