@@ -121,8 +121,14 @@ def _sidecar(surrogate: Surrogate, graph: bytes, opset: int) -> dict[str, Any]:
                 "low": spec.bounds[:, 0].tolist(),
                 "high": spec.bounds[:, 1].tolist(),
             },
+            "head": {
+                "degree": surrogate.model.head_degree,
+                "kind": "per (level, channel) polynomial in the box-scaled parameters, added "
+                "in physical units; the networks learn its residual (degree 0: no head)",
+            },
             "output": {
-                "kind": f"standardise per {surrogate.config.output_scaling}",
+                "kind": f"standardise per {surrogate.config.output_scaling}"
+                + (" the head's residual" if surrogate.model.head_degree else ""),
                 "offset": surrogate.output_offset.tolist(),
                 "scale": surrogate.output_scale.tolist(),
             },

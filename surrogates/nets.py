@@ -169,18 +169,19 @@ class PhysicalSurrogate(nn.Module):
     """FFNN + decoder with the scalings folded in: physical parameters → physical backbones.
 
     The input is min–max scaled with the training box, ``u = (p − low) / (high − low)``;
-    the network's output ``s(u)`` lives in the scaled space and is un-scaled with
-    ``y = s · scale + offset`` (``offset``, ``scale``: ``(n_levels, n_channels)``).
-    Two optional parts:
+    the network's output ``s(u) = decoder(ffnn(u))`` lives in the scaled space and
+    is un-scaled with ``y = s · scale + offset`` (``offset``, ``scale``:
+    ``(n_levels, n_channels)``). Two optional parts:
 
     ``head``
         ``(degree, coefficients (n_monomials, n_levels, n_channels))``: a
-        polynomial in ``u`` per (level, channel), the monomials of
-        :func:`~surrogates.baselines.monomial_factors`;
-        ``s(u) = decoder(ffnn(u)) + head(u)``, so the network learns the residual
-        of a regression (a baseline it must beat) rather than the whole curve.
-        Each monomial is a product of ``degree`` factors ``u · select + offset``
-        (one-hot columns, or the constant 1), so the graph needs no gather.
+        polynomial in ``u`` per (level, channel) in physical units, the monomials
+        of :func:`~surrogates.baselines.monomial_factors`;
+        ``y = s · scale + offset + head(u)``, so the network learns the
+        (standardised) residual of a regression, a baseline it must beat, rather
+        than the whole curve. Each monomial is a product of ``degree`` factors
+        ``u · select + offset`` (one-hot columns, or the constant 1), so the graph
+        needs no gather.
     ``probability_channels``
         ``(n_channels,)`` booleans: those channels are logits in the scaled
         space and leave the graph through a sigmoid, as probabilities (the
@@ -235,24 +236,21 @@ class PhysicalSurrogate(nn.Module):
         return (parameters - self.input_low) / self.input_span
 
     def head_part(self, unit_parameters: torch.Tensor) -> torch.Tensor:
-        """The polynomial head's contribution in the scaled space (0 without one)."""
-        if not self.head_degree:
-            return torch.zeros((), device=unit_parameters.device)
+        """The polynomial head's contribution in physical units."""
         features = unit_parameters @ self.head_select[0] + self.head_offset[0]
         for k in range(1, self.head_degree):
             features = features * (unit_parameters @ self.head_select[k] + self.head_offset[k])
         return (features @ self.head_weight).reshape(-1, *self.output_offset.shape)
 
     def scaled_backbones(self, unit_parameters: torch.Tensor) -> torch.Tensor:
-        """Unit-box parameters → backbones in the training (scaled) space."""
-        latent_part = self.decoder(self.regressor(unit_parameters))
-        if not self.head_degree:
-            return latent_part
-        return latent_part + self.head_part(unit_parameters)
+        """Unit-box parameters → the networks' output, in the training (scaled) space."""
+        return self.decoder(self.regressor(unit_parameters))
 
     def forward(self, parameters: torch.Tensor) -> torch.Tensor:
-        scaled = self.scaled_backbones(self.scale_parameters(parameters))
-        physical = scaled * self.output_scale + self.output_offset
+        unit = self.scale_parameters(parameters)
+        physical = self.scaled_backbones(unit) * self.output_scale + self.output_offset
+        if self.head_degree:
+            physical = physical + self.head_part(unit)
         if not self.has_probabilities:
             return physical
         # Elementwise select (no gather/concat): the graph stays within simple ONNX ops.
