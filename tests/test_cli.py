@@ -19,6 +19,7 @@ from identification.model import JointModel
 from pm_joint.cli import main
 from pm_joint.html import missing_links
 from pm_joint.inference import load_posterior
+from surrogates.dataset import BackboneDataset
 
 FS = 10_000.0
 ZETA = 0.005
@@ -161,6 +162,13 @@ def test_rig_campaign_through_every_stage(rig_campaign, tmp_path):
     argv = ["train-surrogate", str(rig_campaign), "--model", str(model), "--out", str(surrogate)]
     assert main([*argv, "--curves", "80", "--epochs", "40"]) == 0
     assert (surrogate / "surrogate.onnx").exists()
+    # On a two-worker dask LocalCluster the dataset is the serial one, bit for bit.
+    on_dask = tmp_path / "surrogate_dask"
+    argv_dask = [*argv[:-1], str(on_dask), "--curves", "80", "--epochs", "1", "--workers", "2"]
+    assert main(argv_dask) == 0
+    serial, distributed = (BackboneDataset.load(f / "dataset.npz") for f in (surrogate, on_dask))
+    assert distributed.content_hash == serial.content_hash
+    np.testing.assert_array_equal(distributed.Y, serial.Y)
 
     posterior = tmp_path / "posterior.nc"
     argv = ["update", str(rig_campaign / "backbones.csv"), "--forward", "surrogate"]

@@ -319,6 +319,49 @@ def test_the_exported_grid_surrogate_carries_its_test_figures(trained, tmp_path)
     assert sidecar["training"]["data"]["measured_in_training"] == []
 
 
+def test_the_likelihood_sees_the_mask_as_a_probability_not_nan(trained, tmp_path):
+    import pymc as pm
+    import pytensor.tensor as pt
+
+    from pm_joint.forward import SurrogateOp
+    from pm_joint.inference import build_model
+
+    data, surrogate = trained
+    runtime = SurrogateRuntime.load(export_surrogate(surrogate, tmp_path / "surrogate"))
+    op = SurrogateOp(runtime, names=NAMES[::-1])
+    x = data.X[data.in_split("test")]
+    mask = data.Y[data.in_split("test")][..., data.spec.channel_index("has_backbone")] == 0
+    backbones = op(pt.as_tensor(x[:, ::-1])).eval()
+    predicted = runtime.predict(x)
+    # Every in-box vector gets finite values, also where the harmonic balance has no backbone.
+    assert mask.any() and np.isfinite(backbones).all()
+    np.testing.assert_array_equal(
+        backbones[..., 0], np.broadcast_to(runtime.amplitudes_m, mask.shape)
+    )
+    np.testing.assert_allclose(backbones[..., 1], predicted[..., 0], rtol=1e-12)
+    probability = op.has_backbone(pt.as_tensor(x[:, ::-1])).eval()
+    np.testing.assert_allclose(probability, predicted[..., 3], atol=1e-5)  # float32 vs float64
+    # Curves of two in-box vectors, measured over the lower half of the grid.
+    levels = np.geomspace(0.15, 1.5, 12)
+    curves = BackboneSet([duffing_curve(k3, f"a{i}", levels) for i, k3 in enumerate([5e9, 1.5e10])])
+    pm_model = build_model(None, curves, forward="surrogate", surrogate=runtime)
+    low, high = curves.common_range()
+    inside = (runtime.amplitudes_m >= low) & (runtime.amplitudes_m <= high)
+    masked_inside = mask[:, inside].sum(axis=1)
+    assert masked_inside.max() >= 3
+    rows = {"with": x[masked_inside == 0][0], "without": x[masked_inside.argmax()]}
+    potential, logp = {}, {}
+    for key, row in rows.items():
+        fixed = pm.do(pm_model, dict(zip(NAMES, row, strict=True)))
+        potential[key] = float(fixed["backbone_has_backbone"].eval())
+        logp[key] = float(fixed.compile_logp()({}))
+    # Finite in both places (no NaN from the region without a backbone); the mask's
+    # potential makes that region improbable, by about log(1 − p) per masked level.
+    assert np.isfinite(list(logp.values())).all()
+    assert potential["with"] > len(levels) * np.log(0.5)
+    assert potential["without"] < potential["with"] + np.log(0.5)
+
+
 def _datasets_equal(a: BackboneDataset, b: BackboneDataset) -> None:
     for name in ("X", "Y", "observed", "non_monotone", "origin"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
