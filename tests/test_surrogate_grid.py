@@ -341,9 +341,11 @@ def test_the_likelihood_sees_the_mask_as_a_probability_not_nan(trained, tmp_path
     np.testing.assert_allclose(backbones[..., 1], predicted[..., 0], rtol=1e-12)
     probability = op.has_backbone(pt.as_tensor(x[:, ::-1])).eval()
     np.testing.assert_allclose(probability, predicted[..., 3], atol=1e-5)  # float32 vs float64
-    # Curves of two in-box vectors, measured over the lower half of the grid.
+    # Curves of three in-box vectors, measured over the lower half of the grid.
     levels = np.geomspace(0.15, 1.5, 12)
-    curves = BackboneSet([duffing_curve(k3, f"a{i}", levels) for i, k3 in enumerate([5e9, 1.5e10])])
+    curves = BackboneSet(
+        [duffing_curve(k3, f"a{i}", levels) for i, k3 in enumerate([5e9, 1e10, 1.5e10])]
+    )
     pm_model = build_model(None, curves, forward="surrogate", surrogate=runtime)
     low, high = curves.common_range()
     inside = (runtime.amplitudes_m >= low) & (runtime.amplitudes_m <= high)
