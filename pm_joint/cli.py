@@ -7,10 +7,12 @@ bad input ends in a one-line reason on stderr and exit code 2.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 from identification.effects import CATALOGUE
 from identification.model import PRESETS, JointModel
@@ -29,6 +31,35 @@ def _effect_list(text: str) -> list[str]:
                 f"unknown effect {name!r}; the catalogue has: {', '.join(CATALOGUE)}"
             )
     return names
+
+
+@contextlib.contextmanager
+def _executor(args: argparse.Namespace) -> Iterator[Any]:
+    """A dask Client on ``--scheduler`` or on a ``--workers`` LocalCluster; None: serial."""
+    if args.scheduler is None and (args.workers or 1) < 2:
+        yield None
+        return
+    from dask.distributed import Client, LocalCluster
+
+    if args.scheduler is not None:
+        with Client(args.scheduler) as client:
+            yield client
+        return
+    with (
+        LocalCluster(
+            n_workers=args.workers, threads_per_worker=1, dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        yield client
+
+
+def _add_executor_options(p: argparse.ArgumentParser, workers_help: str) -> None:
+    p.add_argument("--workers", type=int, help=workers_help)
+    p.add_argument(
+        "--scheduler", metavar="ADDRESS",
+        help="address of a running dask scheduler (e.g. tcp://host:8786) to compute on",
+    )  # fmt: skip
 
 
 def _cmd_effects(args: argparse.Namespace) -> None:
@@ -51,10 +82,13 @@ def _cmd_model(args: argparse.Namespace) -> None:
 def _cmd_rig(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import write_rig_campaign
 
-    campaign = write_rig_campaign(
-        args.preset, args.out, assemblies=args.assemblies, runs=args.runs, seed=args.seed,
-        n_levels=args.levels, workers=args.workers,
-    )  # fmt: skip
+    with contextlib.ExitStack() as stack:
+        # --workers alone keeps its process pool; --scheduler sends the records to dask.
+        client = stack.enter_context(_executor(args)) if args.scheduler else None
+        campaign = write_rig_campaign(
+            args.preset, args.out, assemblies=args.assemblies, runs=args.runs, seed=args.seed,
+            n_levels=args.levels, workers=args.workers, executor=client,
+        )  # fmt: skip
     print(f"wrote {len(campaign)} record(s) of rig preset {args.preset!r} to {args.out}")
 
 
@@ -85,10 +119,11 @@ def _cmd_train_surrogate(args: argparse.Namespace) -> None:
     from pm_joint.workspace import Workspace
 
     workspace = Workspace(args.dir, model=args.model)
-    runtime = train_surrogate_stage(
-        workspace, args.out, labels=label_records(workspace), n_curves=args.curves,
-        max_epochs=args.epochs, seed=args.seed,
-    )  # fmt: skip
+    with _executor(args) as executor:
+        runtime = train_surrogate_stage(
+            workspace, args.out, labels=label_records(workspace), n_curves=args.curves,
+            max_epochs=args.epochs, seed=args.seed, executor=executor,
+        )  # fmt: skip
     print(f"wrote {args.out}/surrogate.onnx for parameters {', '.join(runtime.parameter_names)}")
 
 
@@ -190,7 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--runs", type=int, default=1, help="runs per assembly (default 1)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--levels", type=int, default=10, help="excitation levels (default 10)")
-    p.add_argument("--workers", type=int, help="processes writing records (default: one per CPU)")
+    _add_executor_options(p, "processes writing records (default: one per CPU)")
     p.set_defaults(func=_cmd_rig)
 
     p = sub.add_parser("backbones", help="extract backbones from every record of a campaign")
@@ -215,6 +250,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--curves", type=int, default=500, help="training curves (default 500)")
     p.add_argument("--epochs", type=int, help="epochs per stage (default: the paper-sized run)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    _add_executor_options(
+        p, "dask LocalCluster workers computing the dataset (default: serial; the dataset "
+        "does not depend on it)",
+    )  # fmt: skip
     p.set_defaults(func=_cmd_train_surrogate)
 
     p = sub.add_parser("criticize", help="where the model fails and which effect it lacks")

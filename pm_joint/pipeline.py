@@ -80,6 +80,7 @@ def write_rig_campaign(
     n_levels: int = 10,
     workers: int | None = 1,
     progress: bool = True,
+    executor: Any = None,
 ) -> Campaign:
     """Write a virtual campaign of the rig preset ``preset`` in the TRC layout.
 
@@ -87,15 +88,16 @@ def write_rig_campaign(
     written by ``workers`` processes (None: one per CPU); the files do not
     depend on it. With more than one, call this from a script's
     ``if __name__ == "__main__":`` block: worker processes start by importing
-    the main script.
+    the main script. An ``executor`` (e.g. a dask Client) replaces the
+    ``workers`` processes.
     """
     if preset not in RIG_PRESETS:
         raise ValueError(f"unknown rig preset {preset!r}; available: {', '.join(RIG_PRESETS)}")
     rig = rig_for_preset(preset, levels=n_levels)
     workers = min(workers or os.cpu_count() or 1, assemblies * runs)
     options = {"assemblies": assemblies, "runs": runs, "seed": seed, "progress": progress}
-    if workers < 2:
-        return rig.write_campaign(out, **options)
+    if executor is not None or workers < 2:
+        return rig.write_campaign(out, executor=executor, **options)
     # forkserver: workers start from a clean process, not a fork of this
     # (possibly multi-threaded) one.
     context = multiprocessing.get_context("forkserver")
@@ -233,6 +235,7 @@ def train_surrogate_stage(
     max_epochs: int | None = None,
     seed: int = 0,
     progress: bool = True,
+    executor: Any = None,
 ) -> SurrogateRuntime:
     """Dataset (analytical + measured curves), training and ONNX export, as the paper.
 
@@ -243,7 +246,9 @@ def train_surrogate_stage(
     curves (harmonic balance, inverted onto fixed excitation levels) make up
     the rest of ``n_curves``. Writes ``out/surrogate.onnx``, its sidecar,
     ``out/dataset.npz`` and a prediction figure; the workspace's surrogate
-    becomes the exported runtime, which is returned.
+    becomes the exported runtime, which is returned. The dataset's curves are
+    computed on ``executor`` when given (a process pool or a dask Client: the
+    dataset is the serial one, bit for bit).
     """
     # torch only here: `pm-joint update` and the reports never load it.
     from surrogates.export import export_surrogate
@@ -267,7 +272,7 @@ def train_surrogate_stage(
     )
     dataset = generate_dataset(
         model, names, max(n_curves - n_measured, 1), bounds=box,
-        amplitude_range_m=(low, high), seed=seed, progress=progress,
+        amplitude_range_m=(low, high), seed=seed, progress=progress, executor=executor,
     )  # fmt: skip
     if labels is not None:
         dataset = add_measured(dataset, measured, labels)

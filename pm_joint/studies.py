@@ -17,7 +17,7 @@ nothing in the library imports this module).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -37,9 +37,9 @@ from identification.rig import RIG_PRESETS, rig_for_preset
 from identification.rig.presets import LAB_OUT_OF_CATALOGUE_SCENARIOS
 from pm_joint.analysis import convergence_verdict
 from pm_joint.inference import hierarchical_model, sample
-from surrogates.evaluate import PAPER_TABLE5, backbone_metrics
-from surrogates.runtime import SurrogateSpec
-from surrogates.train import TrainingConfig, train_surrogate
+from surrogates.dataset import BackboneDataset
+from surrogates.evaluate import PAPER_TABLE5
+from surrogates.train import TrainingConfig, train_on_dataset
 
 __all__ = [
     "KEY_CHANNEL",
@@ -463,62 +463,66 @@ def rows_table(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> str:
 
 
 def table5_study(
-    parameters: np.ndarray,
-    backbones: np.ndarray,
-    spec: SurrogateSpec,
+    dataset: BackboneDataset,
     *,
     sizes: Sequence[int] = (200, 300, 400, 500),
-    test: tuple[np.ndarray, np.ndarray] | None = None,
-    n_test: int = 100,
     config: TrainingConfig | None = None,
     seed: int = 0,
+    scatter: Mapping[str, ArrayLike] | None = None,
 ) -> list[dict[str, Any]]:
-    """The paper's Table 5: accuracy against the number of training curves.
+    """The paper's Table 5: accuracy against the number of training curves, on test figures.
 
     Each size trains a fresh surrogate on the first ``size`` curves of one seeded
-    permutation (so the sets are nested) and evaluates it on the same test set:
-    ``test`` if given, else ``n_test`` curves held out from the data. A size counts
-    every curve handed to training, its validation split included, as the
-    paper's "Datasize" does.
+    permutation of the dataset's train split (so the sets are nested), stops it
+    early on the whole validation split and scores it on the test split, beside
+    the linear, cubic and mean-curve baselines fitted on the same curves
+    (:func:`~surrogates.evaluate.accuracy_report`).
 
     Returns
     -------
     list of dict
-        One row per size: ``n_train``, the :func:`backbone_metrics` headline
-        figures, frequency MAPE, training seconds, and the paper's MSE / MAE /
-        MAPE for that size (None where the paper has no row).
+        One row per size: ``n_train``, ``n_validation``, ``n_test``; the
+        frequency RMSE (Hz) of the surrogate and the baselines on the test
+        split's analytical curves, with the ratios to the linear and cubic
+        baselines and to the scatter; the paper's amplitude figures at excitation levels
+        (:func:`~surrogates.evaluate.table5_figures`; ``table5_representation`` says how they were
+        made); the training seconds; the paper's MSE / MAE / MAPE for that
+        size (None where the paper has no row).
     """
-    config = config or TrainingConfig()
-    parameters = spec.check_parameters(parameters)
-    backbones = spec.check_backbones(backbones)
-    order = np.random.default_rng(seed).permutation(len(parameters))
-    if test is None:
-        test_index, order = order[:n_test], order[n_test:]
-        test = (parameters[test_index], backbones[test_index])
-    x_test, y_test = (
-        spec.check_parameters(test[0], "test parameters"),
-        spec.check_backbones(test[1]),
-    )
-    if max(sizes) > order.size:
-        raise ValueError(f"size {max(sizes)} asked for, only {order.size} training curves exist")
+    train = np.random.default_rng(seed).permutation(dataset.in_split("train"))
+    others = np.concatenate([dataset.in_split("validation"), dataset.in_split("test")])
+    if max(sizes) > train.size:
+        raise ValueError(f"size {max(sizes)} asked for, only {train.size} training curves exist")
     rows = []
     for size in sizes:
-        subset = order[:size]
-        start = time.perf_counter()
-        surrogate = train_surrogate(parameters[subset], backbones[subset], spec, config)
-        seconds = time.perf_counter() - start
-        metrics = backbone_metrics(surrogate.predict(x_test), y_test, spec)
+        subset = dataset.subset(np.sort(np.concatenate([train[:size], others])))
+        surrogate = train_on_dataset(subset, config, scatter=scatter)
+        report = surrogate.test_report
+        analytical = report["analytical"] or {}
+        frequency = {
+            name: figures.get("frequency_hz", {}).get("rmse")
+            for name, figures in analytical.get("models", {}).items()
+        }
+        ratios = analytical.get("ratios", {}).get("frequency_hz", {})
+        table5 = report["table5"] or {}
         paper = PAPER_TABLE5.get(size, (None, None, None))
         rows.append(
             {
                 "n_train": size,
-                "mse_amplitude_mm2": metrics.get("mse_amplitude_mm2"),
-                "mae_amplitude_mm": metrics.get("mae_amplitude_mm"),
-                "mape_amplitude_pct": metrics["channels"].get("amplitude_m", {}).get("mape_pct"),
-                "mape_frequency_pct": metrics["channels"].get("frequency_hz", {}).get("mape_pct"),
-                "pearson": metrics["pearson"],
-                "pearson_min_channel": metrics["pearson_min_channel"],
-                "train_s": seconds,
+                "n_validation": surrogate.n_validation,
+                "n_test": report["counts"]["all"]["test"],
+                "rmse_frequency_hz": frequency.get("surrogate"),
+                "rmse_frequency_hz_linear": frequency.get("linear"),
+                "rmse_frequency_hz_cubic": frequency.get("cubic"),
+                "rmse_frequency_hz_mean_curve": frequency.get("mean_curve"),
+                "frequency_to_linear": ratios.get("to_linear"),
+                "frequency_to_cubic": ratios.get("to_cubic"),
+                "frequency_to_scatter_max": ratios.get("to_scatter_max"),
+                "table5_representation": table5.get("representation"),
+                "mse_amplitude_mm2": table5.get("surrogate", {}).get("mse_amplitude_mm2"),
+                "mae_amplitude_mm": table5.get("surrogate", {}).get("mae_amplitude_mm"),
+                "mape_amplitude_pct": table5.get("surrogate", {}).get("mape_amplitude_pct"),
+                "train_s": surrogate.train_seconds,
                 "paper_mse": paper[0],
                 "paper_mae": paper[1],
                 "paper_mape": paper[2],

@@ -20,6 +20,7 @@ from identification.model import JointModel
 from pm_joint.cli import EXIT_NOT_CONVERGED, main
 from pm_joint.html import missing_links
 from pm_joint.inference import load_posterior
+from surrogates.dataset import BackboneDataset
 
 FS = 10_000.0
 ZETA = 0.005
@@ -166,6 +167,17 @@ def test_rig_campaign_through_every_stage(rig_campaign, tmp_path, capsys):
     argv = ["train-surrogate", str(rig_campaign), "--model", str(model), "--out", str(surrogate)]
     assert main([*argv, "--curves", "80", "--epochs", "40"]) == 0
     assert (surrogate / "surrogate.onnx").exists()
+    # On a two-worker dask LocalCluster the dataset is the serial one, bit for bit.
+    on_dask = tmp_path / "surrogate_dask"
+    argv_dask = [*argv[:-1], str(on_dask), "--curves", "80", "--epochs", "1", "--workers", "2"]
+    assert main(argv_dask) == 0
+    serial, distributed = (BackboneDataset.load(f / "dataset.npz") for f in (surrogate, on_dask))
+    for name in ("X", "Y", "origin", "non_monotone"):
+        np.testing.assert_array_equal(getattr(distributed, name), getattr(serial, name))
+    created = {"created"}  # the one provenance entry that is a clock reading
+    assert {k: v for k, v in distributed.provenance.items() if k not in created} == {
+        k: v for k, v in serial.provenance.items() if k not in created
+    }
 
     posterior = tmp_path / "posterior.nc"
     argv = ["update", str(rig_campaign / "backbones.csv"), "--forward", "surrogate"]

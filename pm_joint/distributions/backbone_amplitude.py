@@ -190,6 +190,7 @@ def BackboneAmplitude(
     channels: Sequence[str] = ("frequency_hz",),
     family: str = "copula",
     density: BackboneDensity | None = None,
+    has_backbone: TensorLike | None = None,
 ) -> TensorVariable:
     """The paper's population matching inside a ``pm.Model``: a potential, not a likelihood.
 
@@ -223,6 +224,14 @@ def BackboneAmplitude(
         ``"copula"`` or ``"mvn"`` (see :class:`BackboneDensity`).
     density
         A ready :class:`BackboneDensity` (skips fitting).
+    has_backbone
+        ``(n_points,)`` probabilities that the model has a backbone point at each
+        of ``backbone``'s amplitudes (the mask channel of an amplitude-grid
+        surrogate, :meth:`~pm_joint.forward.surrogate.SurrogateOp.has_backbone`).
+        Interpolated onto the levels, their log sum (the levels taken as
+        independent) is added as the potential ``{name}_has_backbone``: a
+        parameter vector without a backbone where the curves were measured is
+        improbable by that much, with a gradient, instead of giving NaN.
 
     Notes
     -----
@@ -238,6 +247,13 @@ def BackboneAmplitude(
         interpolate_backbone(backbone, density.amplitudes_m, density.channels)
     )
     predicted = pm.Deterministic(f"{name}_predicted", predicted)
+    if has_backbone is not None:
+        backbone = pt.as_tensor_variable(backbone)
+        order = pt.argsort(backbone[:, 0])
+        probability = pt.interp(
+            density.amplitudes_m, backbone[order, 0], pt.as_tensor_variable(has_backbone)[order]
+        )
+        pm.Potential(f"{name}_has_backbone", pt.sum(pt.log(pt.clip(probability, 1e-12, 1.0))))
     # Kept with the draws (constant_data), so a report can check the density it is given.
     pm.Data(f"{name}_measured", density.observations)
     return pm.Potential(name, logp_graph(density, predicted))

@@ -168,7 +168,12 @@ def build_model(
     with pm.Model() as pm_model:
         theta = uniform_priors(bounds)  # validates the bounds first
         _check_reaches_levels(op, forward, bounds, density)
-        BackboneAmplitude("backbone", op(theta), observed=measured, density=density)
+        # An amplitude-grid surrogate says where the model has no backbone: a probability.
+        grid_surrogate = forward == "surrogate" and op.amplitudes_m is not None
+        mask = op.has_backbone(theta) if grid_surrogate else None
+        BackboneAmplitude(
+            "backbone", op(theta), observed=measured, density=density, has_backbone=mask
+        )
     pm_model.forward_op = op  # kept for reports and posterior-predictive backbones
     pm_model.backbone_density = density  # sample() keeps it with the draws
     pm_model.population_model = POPULATION_MATCHING  # sample() keeps it with the draws
