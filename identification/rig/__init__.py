@@ -1,7 +1,9 @@
 """The virtual test rig: phase-resonance records of a known ground truth.
 
 :class:`Rig` (:mod:`identification.rig.rig`) simulates and writes records in the
-TRC layout with the ideal PLL simulator; :class:`LabRig`
+TRC layout with the ideal PLL simulator, :class:`ForceRig`
+(:mod:`identification.rig.force`) the same test driven by a measured force, in
+the column layout; :class:`LabRig`
 (:mod:`identification.rig.lab`) measures like a laboratory: shaker distortion,
 a rippling multiply-and-low-pass PLL, drift, dropouts
 (:mod:`identification.rig.conditions`) and joint physics outside the catalogue
@@ -9,6 +11,7 @@ a rippling multiply-and-low-pass PLL, drift, dropouts
 named scenarios of both.
 """
 
+from identification.rig.force import ForceRig
 from identification.rig.lab import LabAssembly, LabRig
 from identification.rig.presets import (
     HIDDEN_EFFECT_SCENARIOS,
@@ -35,6 +38,7 @@ __all__ = [
     "LAB_NULL_SCENARIOS",
     "LAB_OUT_OF_CATALOGUE_SCENARIOS",
     "RIG_PRESETS",
+    "ForceRig",
     "LabAssembly",
     "LabRig",
     "RecordTruth",
