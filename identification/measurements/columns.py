@@ -264,7 +264,9 @@ class ColumnLayout:
         ``displacement``, ``velocity`` or ``acceleration`` of the response (SI);
         default from the response's name when it says (``disp…``, ``vel…``, ``acc…``).
     excitation
-        Excitation column, or None (a free decay needs none).
+        Excitation column; default the one column whose name says it is one
+        (``excitation…``, ``force…``, ``base…acc…``, ``base…vel…``), else none
+        (a free decay needs none).
     excitation_kind
         ``base-acceleration``, ``base-velocity`` or ``force``; default from the
         excitation's name when it says (``force…``, ``base…acc…``, ``base…vel…``).
@@ -607,6 +609,16 @@ def read_columns(path: str | Path, layout: ColumnLayout | None = None) -> Column
 
     time_key = role(layout.time, "time", ("t", "zeit"), ("time",))
     excitation_key = role(layout.excitation, "excitation")
+    if excitation_key is None:  # a column whose name says it is an excitation, when only one
+        said = [
+            k
+            for k in vectors
+            if k not in taken
+            and (_guess(k.rsplit("/", 1)[-1], _KIND_RULES) or _normal(k).startswith("excitation"))
+        ]
+        if len(said) == 1:
+            excitation_key = said[0]
+            taken.add(excitation_key)
     frequency_key = role(layout.frequency, "frequency", (), ("freq",))
     level_key = role(layout.level, "level", (), ("level",))
     response_key = role(layout.response, "response")
