@@ -12,8 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from independent_sim import free_decay
-from scipy import signal
+from independent_sim import free_decay, hilbert_backbone
 
 from identification.analytical import harmonic
 from identification.measurements.columns import ColumnRecord
@@ -77,24 +76,9 @@ def test_decay_backbone_is_the_harmonic_balance_backbone(decay, quantity):
         assert curve.mean_offset_m is None
 
 
-def _hilbert_backbone(time_s, displacement):
-    """The field's reference: Hilbert transform of the band-passed fundamental, period-averaged."""
-    sos = signal.butter(4, [60.0, 160.0], btype="bandpass", fs=FS, output="sos")
-    fundamental = signal.sosfiltfilt(sos, displacement)
-    analytic = signal.hilbert(fundamental)
-    phase = np.unwrap(np.angle(analytic))
-    frequency = np.gradient(phase, time_s) / (2 * np.pi)
-    period = round(FS / 103.0)
-    kernel = np.ones(period) / period
-    amplitude = np.convolve(np.abs(analytic), kernel, mode="same")
-    frequency = np.convolve(frequency, kernel, mode="same")
-    inside = slice(10 * period, -10 * period)  # away from the filter's and transform's ends
-    return amplitude[inside], frequency[inside]
-
-
 def test_decay_backbone_agrees_with_the_hilbert_transform(decay):
     curve = extract_backbone(_record(decay, "displacement"))
-    amplitude, frequency = _hilbert_backbone(decay["time_s"], decay["displacement_m"])
+    amplitude, frequency = hilbert_backbone(decay["time_s"], decay["displacement_m"], (60, 160))
     order = np.argsort(amplitude)
     common = (curve.amplitude_m > amplitude.min()) & (curve.amplitude_m < amplitude.max())
     reference = np.interp(curve.amplitude_m[common], amplitude[order], frequency[order])
