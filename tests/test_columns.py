@@ -136,3 +136,44 @@ def test_unreadable_tables_are_refused_with_a_reason(text, reason, tmp_path, cap
     assert main(["backbones", str(path), "--test", "free-decay"]) == 2
     err = [line for line in capsys.readouterr().err.splitlines() if "pm-joint" in line]
     assert len(err) == 1 and reason in err[0] and str(path) in err[0]
+
+
+def _steady(tmp_path, **extra):
+    """A laser-velocity record of a beam driven at one frequency (1024 Hz, 2 s), no base."""
+    t = np.arange(2048) / 1024.0
+    columns = {"time": t, "velocity": 1e-3 * np.sin(2 * np.pi * 18.0 * t), **extra}
+    path = tmp_path / "beam.csv"
+    pd.DataFrame(columns).to_csv(path, index=False)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("options", "extra", "reason"),
+    [
+        # the measured bolted beam of the issue: the "linear frequency" would be the drive's
+        ([], {}, "needs its excitation measured"),
+        (["--test", "stepped-sine"], {}, "needs its excitation measured"),
+        (["--test", "free-decay"], {}, "does not decay"),
+        # a zero base channel: say that the base is zero, and what to do
+        (["--excitation", "base_acceleration"], {"base_acceleration": 0.0},
+         "'base_acceleration' (base-acceleration) is zero throughout"),
+    ],
+)  # fmt: skip
+def test_what_cannot_be_identified_is_refused(options, extra, reason, tmp_path, capsys):
+    path = _steady(tmp_path, **extra)
+    argv = ["identify", str(path), "--quantity", "velocity", *options, "--out", "m.json"]
+    assert main(argv) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if "pm-joint" in line]
+    assert len(err) == 1 and reason in err[0] and str(path) in err[0]
+    if extra:
+        assert "--test free-decay" in err[0]
+
+
+def test_a_decay_of_too_few_periods_is_refused(ring, tmp_path, capsys):
+    path = tmp_path / "short.csv"
+    pd.DataFrame({k: v[:400] for k, v in ring.items()}).to_csv(path, index=False)  # 4 periods
+    assert (
+        main(["backbones", str(path), *["--test", "free-decay", "--quantity", "displacement"]]) == 2
+    )
+    err = [line for line in capsys.readouterr().err.splitlines() if "pm-joint" in line]
+    assert len(err) == 1 and "too few periods" in err[0]
