@@ -177,3 +177,42 @@ def test_a_decay_of_too_few_periods_is_refused(ring, tmp_path, capsys):
     )
     err = [line for line in capsys.readouterr().err.splitlines() if "pm-joint" in line]
     assert len(err) == 1 and "too few periods" in err[0]
+
+
+def test_a_force_driven_stepped_sine_reads_the_linear_backbone(tmp_path):
+    """Steady states of a linear oscillator ẍ + 2ζω₀ẋ + ω₀²x = g·F at five drive frequencies
+    around resonance, one after the other with the controller's frequency channel: every hold,
+    on or off resonance, reads ω₀ and ζ (equivalent linearisation of the fundamental balance),
+    the force turned into modal units by the stated gain."""
+    from independent_sim import forced_steady_state
+
+    f0, zeta, gain, force_n = 100.0, 0.01, 10.0, 0.05
+    omega0 = 2 * np.pi * f0
+
+    def linear(x, v):
+        return omega0**2 * x + 2 * zeta * omega0 * v
+
+    parts = []
+    for f in (97.0, 98.5, 100.0, 101.5, 103.0):
+        w = 2 * np.pi * f
+        steady = forced_steady_state(linear, lambda t, w=w: gain * force_n * np.cos(w * t),
+                                     1 / f, settle_periods=300, record_periods=75)  # fmt: skip
+        parts.append((steady, f))
+    t = np.arange(sum(p["time_s"].size for p, _ in parts)) / FS
+    table = pd.DataFrame({
+        "time": t,
+        "displacement": np.concatenate([p["displacement_m"] for p, _ in parts]),
+        "force": np.concatenate([p["excitation"] / gain for p, _ in parts]),
+        "frequency": np.concatenate([np.full(p["time_s"].size, f) for p, f in parts]),
+    })  # fmt: skip
+    path = tmp_path / "steps.csv"
+    table.to_csv(path, index=False)
+    out = tmp_path / "backbones.csv"
+    argv = ["backbones", str(path), "--test", "stepped-sine", "--quantity", "displacement",
+            "--excitation-kind", "force", "--forcing-gain", str(gain)]  # fmt: skip
+    argv += ["--out", str(out)]
+    assert main(argv) == 0
+    curve = pd.read_csv(out)
+    assert len(curve) == 5
+    np.testing.assert_allclose(curve["frequency_hz"], f0, rtol=1e-5)
+    np.testing.assert_allclose(curve["damping_ratio"], zeta, rtol=1e-3)
