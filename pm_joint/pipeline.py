@@ -29,7 +29,7 @@ from identification.measurements.columns import ColumnCampaign
 from identification.measurements.decay import extract_decay_backbone
 from identification.measurements.records import Campaign
 from identification.model import JointModel, parameter_bounds
-from identification.rig import RIG_PRESETS, ForceRig, Rig
+from identification.rig import RIG_PRESETS, ForceRig, rig_for_preset
 from identification.sindy import (
     PAPER_LIBRARY,
     Identification,
@@ -98,7 +98,7 @@ def write_rig_campaign(
     if force_driven:
         rig = ForceRig.preset(preset, levels=n_levels, response_quantity=quantity)
     else:
-        rig = Rig.preset(preset, levels=n_levels)
+        rig = rig_for_preset(preset, levels=n_levels)
     workers = min(workers or os.cpu_count() or 1, assemblies * runs)
     options = {"assemblies": assemblies, "runs": runs, "seed": seed, "progress": progress}
     if workers < 2:

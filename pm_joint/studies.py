@@ -22,7 +22,7 @@ from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.extraction import extract_backbones
 from identification.measurements.records import Record
 from identification.model import JointModel
-from identification.rig import RIG_PRESETS, Rig
+from identification.rig import RIG_PRESETS, rig_for_preset
 from pm_joint.inference import hierarchical_model, sample
 from surrogates.evaluate import PAPER_TABLE5, backbone_metrics
 from surrogates.runtime import SurrogateSpec
@@ -142,7 +142,7 @@ def hidden_effect_study(
 ) -> StudyResult:
     """Run a rig scenario through the loop: fit the base model, criticise, add, repeat.
 
-    The rig (:meth:`identification.rig.Rig.preset`) draws ``assemblies`` assemblies
+    The rig (:func:`identification.rig.rig_for_preset`) draws ``assemblies`` assemblies
     and their noise as :meth:`~identification.rig.Rig.write_campaign` does (seeds
     ``[seed, a]`` and ``[seed, a, 1]``) but keeps the records in memory. The
     user's starting model is the preset's base model with its coefficients
@@ -151,7 +151,7 @@ def hidden_effect_study(
     the effect ranked first, until nothing significant is missing or ``rounds``
     effects were added.
     """
-    rig = Rig.preset(scenario, levels=levels, hold_s=hold_s)
+    rig = rig_for_preset(scenario, levels=levels, hold_s=hold_s)
     records = []
     for a in range(1, assemblies + 1):
         model, gain = rig.draw(np.random.default_rng([seed, a]))

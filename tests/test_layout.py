@@ -36,8 +36,12 @@ def _imports(path: Path, known: dict[str, Path]) -> set[str]:
         if isinstance(node, ast.Import):
             found |= {alias.name for alias in node.names}
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            found.add(node.module)
-            found |= {f"{node.module}.{alias.name}" for alias in node.names}
+            submodules = {f"{node.module}.{alias.name}" for alias in node.names}
+            found |= submodules
+            # `from package import module` takes the module, not the package's own names
+            # (Python imports the parent package first for every submodule anyway).
+            if not submodules <= set(known):
+                found.add(node.module)
     return {name for name in found if name in known}
 
 
