@@ -353,7 +353,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     showwarning = warnings.showwarning
     warnings.formatwarning = one_line  # a warning is one line, as an error is
-    if showwarning.__module__ == "warnings":  # not a caller's recorder (pytest, catch_warnings)
+    # Only where warnings reach the terminal: a caller that records them (pytest.warns,
+    # catch_warnings(record=True)) swaps the module's private printer for its own list.
+    printer = getattr(warnings, "_showwarnmsg_impl", None)
+    if showwarning.__module__ == "warnings" and getattr(printer, "__module__", None) == "warnings":
         warnings.showwarning = show
     try:
         args.func(args)

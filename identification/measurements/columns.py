@@ -37,7 +37,7 @@ import io
 import math
 import re
 import warnings
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -53,7 +53,12 @@ from identification.measurements.quantities import (
     UNITS,
     check_choice,
 )
-from identification.measurements.records import Campaign, StepSchedule, is_trc_source
+from identification.measurements.records import (
+    Campaign,
+    RecordFiles,
+    StepSchedule,
+    is_trc_source,
+)
 from identification.measurements.signals import central_difference, trapezoid_integral
 
 __all__ = [
@@ -723,7 +728,7 @@ def write_columns(record: ColumnRecord, path: str | Path, level: np.ndarray | No
 
 
 @dataclass(eq=False)
-class ColumnCampaign(Sequence[ColumnRecord]):
+class ColumnCampaign(RecordFiles):
     """The column-layout records of a folder (or one file), read lazily one at a time.
 
     Files with the extensions of :data:`COLUMN_EXTENSIONS` are records, in
@@ -761,22 +766,12 @@ class ColumnCampaign(Sequence[ColumnRecord]):
     def names(self) -> list[str]:
         return [p.stem for p in self.paths]
 
-    def __len__(self) -> int:
-        return len(self.paths)
+    @property
+    def folder(self) -> Path:
+        return self.source
 
-    def __getitem__(self, key):  # int, slice or record name
-        if isinstance(key, str):
-            try:
-                key = self.names.index(key)
-            except ValueError:
-                raise KeyError(f"no record {key!r} in {self.source}") from None
-        if isinstance(key, slice):
-            return [self[i] for i in range(*key.indices(len(self)))]
-        return read_columns(self.paths[key], self.layout)
-
-    def __iter__(self) -> Iterator[ColumnRecord]:
-        for i in range(len(self)):
-            yield self[i]
+    def _read(self, index: int) -> ColumnRecord:
+        return read_columns(self.paths[index], self.layout)
 
     def __repr__(self) -> str:
         return f"<ColumnCampaign {self.source}: {len(self)} records>"

@@ -70,6 +70,7 @@ __all__ = [
     "Hold",
     "Modes",
     "Record",
+    "RecordFiles",
     "StepSchedule",
     "is_trc_source",
     "read_modes",
@@ -814,7 +815,41 @@ def _config_files(folder: Path) -> dict[str, dict[str, Path]]:
     return found
 
 
-class Campaign(Sequence[Record]):
+class RecordFiles(Sequence):
+    """Records of files (``paths``), read lazily one at a time by index, slice or name.
+
+    Subclasses give ``folder``, ``names`` (one per path) and ``_read(index)``.
+    """
+
+    paths: list[Path] | tuple[Path, ...]
+    folder: Path
+
+    @property
+    def names(self) -> list[str]:
+        raise NotImplementedError
+
+    def _read(self, index: int):
+        raise NotImplementedError
+
+    def __len__(self) -> int:
+        return len(self.paths)
+
+    def __getitem__(self, key):  # int, slice or record name
+        if isinstance(key, str):
+            try:
+                key = self.names.index(key)
+            except ValueError:
+                raise KeyError(f"no record {key!r} in {self.folder}") from None
+        if isinstance(key, slice):
+            return [self[i] for i in range(*key.indices(len(self)))]
+        return self._read(key)
+
+    def __iter__(self) -> Iterator:
+        for i in range(len(self)):
+            yield self[i]
+
+
+class Campaign(RecordFiles):
     """All TRC records of a folder (or one data file), read lazily one at a time.
 
     Data files are grouped with the step and modes files of their configuration
@@ -862,24 +897,10 @@ class Campaign(Sequence[Record]):
             self._shared[config] = (read_steps(files["steps"]), modes)
         return self._shared[config]
 
-    def __len__(self) -> int:
-        return len(self.paths)
-
-    def __getitem__(self, key):  # int, slice or record name
-        if isinstance(key, str):
-            try:
-                key = self.names.index(key)
-            except ValueError:
-                raise KeyError(f"no record {key!r} in {self.folder}") from None
-        if isinstance(key, slice):
-            return [self[i] for i in range(*key.indices(len(self)))]
-        path = self.paths[key]
+    def _read(self, index: int) -> Record:
+        path = self.paths[index]
         steps, modes = self._config_inputs(_name_part(path.name, "config"))
         return read_record(path, steps=steps, modes=modes, test=self.test)
-
-    def __iter__(self) -> Iterator[Record]:
-        for i in range(len(self)):
-            yield self[i]
 
     def __repr__(self) -> str:
         return f"<Campaign {self.folder}: {len(self)} records>"
