@@ -1,7 +1,15 @@
 """The ``pm-joint`` command.
 
 Each subcommand is a thin wrapper over one function of :mod:`pm_joint.pipeline`;
-bad input ends in a one-line reason on stderr and exit code 2.
+bad input ends in a one-line reason on stderr and exit code 2, and every
+warning is one line naming what it is about.
+
+``backbones``, ``identify``, ``criticize`` and ``update`` read records alike: a
+folder or a file in the TRC layout, or in a column layout (CSV/TSV with a
+header, MAT, HDF5), with the test type and, for column files, the columns'
+roles given by the record options (:func:`add_record_options`), e.g.
+``pm-joint backbones ring.csv --test free-decay --response displacement
+--quantity displacement``.
 """
 
 from __future__ import annotations
@@ -15,8 +23,11 @@ from pathlib import Path
 from typing import Any
 
 from identification.effects import CATALOGUE
+from identification.measurements.quantities import EXCITATION_KINDS, QUANTITIES, TEST_TYPES
+from identification.measurements.signals import DECAY_EDGE_PERIODS
 from identification.model import PRESETS, JointModel
 from identification.rig import RIG_PRESETS
+from identification.sindy import PAPER_LIBRARY
 
 # Names only: the samplers and population models are known without importing PyMC.
 SAMPLERS = ("metropolis", "demetropolisz", "nuts", "nutpie")
@@ -62,6 +73,78 @@ def _add_executor_options(p: argparse.ArgumentParser, workers_help: str) -> None
     )  # fmt: skip
 
 
+def _band(text: str) -> tuple[float, float]:
+    try:
+        low, high = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--band needs LOW,HIGH in Hz, got {text!r}") from None
+    if not 0 < low < high:
+        raise argparse.ArgumentTypeError(f"--band needs 0 < LOW < HIGH, got {text!r}")
+    return low, high
+
+
+def add_record_options(parser: argparse.ArgumentParser) -> None:
+    """The options that say how records read (the same on every command that reads them)."""
+    group = parser.add_argument_group("records (TRC folders take --test; column files all)")
+    group.add_argument("--test", choices=TEST_TYPES, default="phase-resonance",
+                       help="test type (default phase-resonance: PLL holds)")  # fmt: skip
+    group.add_argument("--time", metavar="NAME", help="time column (default: time or t)")
+    group.add_argument("--response", metavar="NAME", help="response column")
+    group.add_argument("--quantity", choices=QUANTITIES,
+                       help="what the response is (default: from its name)")  # fmt: skip
+    group.add_argument("--relative-response", action="store_true",
+                       help="the response is relative to the base (default: absolute)")  # fmt: skip
+    group.add_argument("--excitation", metavar="NAME", help="excitation column")
+    group.add_argument("--excitation-kind", choices=EXCITATION_KINDS,
+                       help="what the excitation is (default: from its name)")  # fmt: skip
+    group.add_argument("--excitation-gain", type=float, default=1.0, metavar="GAIN",
+                       help="SI units of the excitation per unit of its column, e.g. N/V "
+                       "for a force read as a voltage (default 1)")  # fmt: skip
+    group.add_argument("--forcing-gain", type=float, metavar="G",
+                       help="modal forcing gain of a force-driven test (1/kg; default: "
+                       "measured from the record's decay)")  # fmt: skip
+    group.add_argument("--frequency", metavar="NAME",
+                       help="controller frequency column (Hz; default: frequency…)")  # fmt: skip
+    group.add_argument("--level", metavar="NAME",
+                       help="commanded level column: its runs of one value are the holds "
+                       "(default: level…)")  # fmt: skip
+    group.add_argument("--decimal-comma", action="store_true",
+                       help="text files write 0,5 for 0.5 (else detected)")  # fmt: skip
+    group.add_argument("--edge-periods", type=float, metavar="N",
+                       help="periods left out at the ends of a record for identification "
+                       f"(default 20, {DECAY_EDGE_PERIODS:g} for a free decay) and at the start "
+                       "of a decay for its backbone (default 0)")  # fmt: skip
+    group.add_argument("--window-periods", type=float, default=6.0, metavar="N",
+                       help="periods per window of a decay's backbone (default 6)")  # fmt: skip
+    group.add_argument("--band", type=_band, metavar="LOW,HIGH",
+                       help="pass band of the identification and where a decay's mode is "
+                       "looked for (Hz; default: frequency channel or spectrum)")  # fmt: skip
+
+
+def _workspace_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The Workspace keywords of the record options."""
+    from identification.measurements.columns import ColumnLayout
+
+    layout = ColumnLayout(
+        test=args.test, time=args.time, response=args.response, quantity=args.quantity,
+        excitation=args.excitation, excitation_kind=args.excitation_kind,
+        excitation_gain=args.excitation_gain, frequency=args.frequency, level=args.level,
+        decimal_comma=True if args.decimal_comma else None, relative=args.relative_response,
+        forcing_gain=args.forcing_gain,
+    )  # fmt: skip
+    decay = {"window_periods": args.window_periods, "edge_periods": args.edge_periods or 0.0,
+             "band_hz": args.band}  # fmt: skip
+    return {"layout": layout, "decay_options": decay}
+
+
+def _identify_options(args: argparse.Namespace) -> dict[str, Any]:
+    """Preprocessing options of the identification from the record options."""
+    edge = args.edge_periods
+    if edge is None:
+        edge = DECAY_EDGE_PERIODS if args.test == "free-decay" else 20.0
+    return {"edge_periods": edge, "band_hz": args.band}
+
+
 def _cmd_effects(args: argparse.Namespace) -> None:
     width = max(len(n) for n in CATALOGUE)
     for effect in CATALOGUE.values():
@@ -88,8 +171,10 @@ def _cmd_rig(args: argparse.Namespace) -> None:
         campaign = write_rig_campaign(
             args.preset, args.out, assemblies=args.assemblies, runs=args.runs, seed=args.seed,
             n_levels=args.levels, workers=args.workers, executor=client,
+            force_driven=args.force_driven, quantity=args.quantity,
         )  # fmt: skip
-    print(f"wrote {len(campaign)} record(s) of rig preset {args.preset!r} to {args.out}")
+    layout = "column layout, force-driven" if args.force_driven else "TRC layout"
+    print(f"wrote {len(campaign)} record(s) of rig preset {args.preset!r} to {args.out} ({layout})")
 
 
 def _cmd_backbones(args: argparse.Namespace) -> None:
@@ -97,9 +182,12 @@ def _cmd_backbones(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import campaign_backbones
     from pm_joint.workspace import Workspace
 
-    workspace = Workspace(args.dir, backbones_csv=args.out, n_periods=args.periods)
+    workspace = Workspace(args.dir, backbones_csv=args.out, n_periods=args.periods,
+                          **_workspace_options(args))  # fmt: skip
     backbones = campaign_backbones(workspace)
-    print(f"extracted {len(backbones)} backbone(s) to {workspace.backbones_csv}")
+    points = sum(len(b) for b in backbones)
+    print(f"extracted {len(backbones)} backbone(s), {points} points ({args.test}) to "
+          f"{workspace.backbones_csv}")  # fmt: skip
     print(extraction_summary(backbones))
 
 
@@ -107,8 +195,9 @@ def _cmd_identify(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import identify_campaign
     from pm_joint.workspace import Workspace
 
-    workspace = Workspace(args.dir)
-    result = identify_campaign(workspace, args.effects, n_records=args.records, out=args.out)
+    workspace = Workspace(args.dir, **_workspace_options(args))
+    result = identify_campaign(workspace, args.effects, n_records=args.records, out=args.out,
+                               **_identify_options(args))  # fmt: skip
     print(result.summary())
     print(result.model.equation())
     print(f"wrote {args.out}")
@@ -129,8 +218,10 @@ def _cmd_train_surrogate(args: argparse.Namespace) -> None:
 
 def _cmd_criticize(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import criticize_campaign
+    from pm_joint.workspace import Workspace
 
-    crit = criticize_campaign(args.dir, args.model, args.out, rounds=args.rounds)
+    workspace = Workspace(args.dir, **_workspace_options(args))
+    crit = criticize_campaign(workspace, args.model, args.out, rounds=args.rounds)
     rounds = crit.rounds
     for k, report in enumerate(rounds, start=1):
         if len(rounds) > 1:
@@ -153,7 +244,8 @@ def _cmd_update(args: argparse.Namespace) -> int:
         raise ValueError("--forward surrogate needs --surrogate SURROGATE_DIR")
     if forward != "surrogate" and not args.model:
         raise ValueError(f"--forward {forward} needs --model model.json")
-    workspace = Workspace(args.dir, model=args.model, surrogate=args.surrogate)
+    workspace = Workspace(args.dir, model=args.model, surrogate=args.surrogate,
+                          **_workspace_options(args))  # fmt: skip
     idata = update_backbones(
         workspace, args.out, population=args.population, forward=forward,
         sampler=args.sampler, draws=args.draws, tune=args.tune, chains=args.chains,
@@ -226,21 +318,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--levels", type=int, default=10, help="excitation levels (default 10)")
     _add_executor_options(p, "processes writing records (default: one per CPU)")
+    p.add_argument(
+        "--force-driven", action="store_true",
+        help="drive the structure by a measured force and end each record in a ring-down; "
+        "written in the column layout (HDF5)",
+    )  # fmt: skip
+    p.add_argument("--quantity", choices=QUANTITIES, default="velocity",
+                   help="response of a force-driven record (default velocity)")  # fmt: skip
     p.set_defaults(func=_cmd_rig)
 
+    records = "campaign folder or record file (TRC or column layout)"
     p = sub.add_parser("backbones", help="extract backbones from every record of a campaign")
-    p.add_argument("dir", help="campaign folder (TRC layout)")
-    p.add_argument("--out", help="CSV file (default DIR/backbones.csv)")
+    p.add_argument("dir", help=records)
+    p.add_argument("--out", help="CSV file (default DIR/backbones.csv, FILE_backbones.csv)")
     p.add_argument("--periods", type=int, default=70, help="periods per hold (default 70)")
+    add_record_options(p)
     p.set_defaults(func=_cmd_backbones)
 
     p = sub.add_parser("identify", help="SINDy identification of a joint model")
-    p.add_argument("dir", help="campaign folder (TRC layout)")
+    p.add_argument("dir", help=records)
     p.add_argument(
-        "--effects", type=_effect_list, required=True, help="library: comma-separated effect names"
-    )
+        "--effects", type=_effect_list, default=list(PAPER_LIBRARY),
+        help="library: comma-separated effect names (default: the paper's library, every "
+        "catalogue effect but microslip)",
+    )  # fmt: skip
     p.add_argument("--out", required=True, help="model JSON file")
     p.add_argument("--records", type=int, default=3, help="records fitted jointly (default 3)")
+    add_record_options(p)
     p.set_defaults(func=_cmd_identify)
 
     p = sub.add_parser("train-surrogate", help="dataset, training and ONNX export of a surrogate")
@@ -257,12 +361,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_train_surrogate)
 
     p = sub.add_parser("criticize", help="where the model fails and which effect it lacks")
-    p.add_argument("dir", help="campaign folder (TRC layout)")
+    p.add_argument("dir", help=f"{records}, or a backbones CSV")
     p.add_argument("--model", required=True, help="model JSON file")
     p.add_argument("--out", required=True, help="report folder (criticism.json + figures)")
     p.add_argument(
         "--rounds", type=int, default=0, help="add the best proposed effect this many times"
     )
+    add_record_options(p)
     p.set_defaults(func=_cmd_criticize)
 
     p = sub.add_parser(
@@ -270,7 +375,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Exit codes: 0 converged, 2 bad input, 3 posterior written but NOT "
         "converged (r̂ > 1.01, ESS < 400 or divergences).",
     )  # fmt: skip
-    p.add_argument("dir", help="campaign folder (TRC layout) or a backbones CSV")
+    p.add_argument("dir", help=f"{records}, or a backbones CSV")
     p.add_argument(
         "--population", choices=POPULATION_MODELS, default="matching",
         help="matching: the paper's population matching (a population range); hierarchical: "
@@ -306,6 +411,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--resume", action="store_true",
         help="continue a stopped run from its trace instead of starting again",
     )  # fmt: skip
+    add_record_options(p)
     p.set_defaults(func=_cmd_update)
 
     p = sub.add_parser("report", help="HTML report of a run")
@@ -333,7 +439,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     def one_line(message, category, *_, **__) -> str:
         return f"pm-joint {args.command}: {category.__name__}: {message}\n"
 
+    def show(message, category, *_, **__) -> None:
+        from tqdm.auto import tqdm
+
+        # Through tqdm: a progress bar on the terminal is cleared first and redrawn after.
+        tqdm.write(one_line(message, category).rstrip("\n"), file=sys.stderr)
+
+    showwarning = warnings.showwarning
     warnings.formatwarning = one_line  # a warning is one line, as an error is
+    # Only where warnings reach the terminal: a caller that records them (pytest.warns,
+    # catch_warnings(record=True)) swaps the module's private printer for its own list.
+    printer = getattr(warnings, "_showwarnmsg_impl", None)
+    if showwarning.__module__ == "warnings" and getattr(printer, "__module__", None) == "warnings":
+        warnings.showwarning = show
     try:
         code = args.func(args) or 0
     except (ValueError, FileNotFoundError, NotADirectoryError) as exc:
@@ -342,6 +460,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     finally:
         warnings.formatwarning = formatwarning
+        warnings.showwarning = showwarning
     return code
 
 

@@ -10,6 +10,7 @@ subcommands and the demo call these and nothing else. Figures come from
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import multiprocessing
 import os
@@ -24,9 +25,11 @@ import xarray as xr
 from identification.analytical import harmonic, pll
 from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import Backbone, BackboneSet
+from identification.measurements.columns import ColumnCampaign
+from identification.measurements.decay import extract_decay_backbone
 from identification.measurements.records import Campaign
 from identification.model import JointModel, parameter_bounds
-from identification.rig import RIG_PRESETS, rig_for_preset
+from identification.rig import RIG_PRESETS, ForceRig, rig_for_preset
 from identification.sindy import (
     PAPER_LIBRARY,
     Identification,
@@ -81,10 +84,15 @@ def write_rig_campaign(
     workers: int | None = 1,
     progress: bool = True,
     executor: Any = None,
-) -> Campaign:
+    force_driven: bool = False,
+    quantity: str = "velocity",
+) -> Campaign | ColumnCampaign:
     """Write a virtual campaign of the rig preset ``preset`` in the TRC layout.
 
-    ``n_levels`` excitation levels per record. Records are simulated and
+    ``n_levels`` excitation levels per record. With ``force_driven`` the
+    structure is driven by a measured force and each record ends in a
+    ring-down, written in the column layout with a ``quantity`` response
+    (:class:`~identification.rig.force.ForceRig`). Records are simulated and
     written by ``workers`` processes (None: one per CPU); the files do not
     depend on it. With more than one, call this from a script's
     ``if __name__ == "__main__":`` block: worker processes start by importing
@@ -93,7 +101,10 @@ def write_rig_campaign(
     """
     if preset not in RIG_PRESETS:
         raise ValueError(f"unknown rig preset {preset!r}; available: {', '.join(RIG_PRESETS)}")
-    rig = rig_for_preset(preset, levels=n_levels)
+    if force_driven:
+        rig = ForceRig.preset(preset, levels=n_levels, response_quantity=quantity)
+    else:
+        rig = rig_for_preset(preset, levels=n_levels)
     workers = min(workers or os.cpu_count() or 1, assemblies * runs)
     options = {"assemblies": assemblies, "runs": runs, "seed": seed, "progress": progress}
     if executor is not None or workers < 2:
@@ -123,16 +134,43 @@ def identify_campaign(
 ) -> Identification:
     """SINDy identification from the first ``n_records`` records; the workspace's model becomes it.
 
-    With ``out`` (a JSON path) the model is written there, with the velocity
-    and acceleration validation figures (the paper's Figs. 9–10) beside it.
+    Records that cannot be identified are refused first: a base-driven record
+    whose excitation is zero, a free decay that does not decay
+    (:func:`~identification.measurements.decay.extract_decay_backbone`; a
+    driven column record without an excitation is refused when read). A
+    force-driven record drives the model with the equivalent base acceleration
+    ``−g·F``, ``g`` its stated or estimated modal forcing gain
+    (:mod:`identification.measurements.forcing`); the model keeps the median
+    gain as its ``forcing_gain``. With ``out`` (a JSON path) the model is
+    written there, with the velocity and acceleration validation figures (the
+    paper's Figs. 9–10) beside it.
     """
     chosen = workspace.records[: min(n_records, len(workspace.records))]
+    gains = []
+    for i, record in enumerate(chosen):
+        if record.test == "free-decay":
+            extract_decay_backbone(record, **workspace.decay_options)  # refuses a non-decay
+        elif not np.any(record.excitation):
+            raise ValueError(
+                f"{record.path or record.name}: the excitation ({record.excitation_kind}) is "
+                "zero throughout: nothing drives this record, and a steady response alone "
+                "gives its own frequency as the 'natural' one; a ring-down is read with "
+                "--test free-decay"
+            )
+        if record.excitation_kind == "force":
+            gains.append(record.forcing_gain)
+            chosen[i] = record.with_forcing_gain(record.forcing_gain)
     result = identify(chosen, list(effects), **options)
+    if gains:
+        model = result.model.with_forcing_gain(float(np.median(gains)))
+        result = dataclasses.replace(result, model=model)
     workspace.model = result.model
     if out is not None:
         out = Path(out)
         result.model.to_json(out)
-        validation = validate(result.model, record_kinematics(chosen[0]))
+        preprocessing = {k: options[k] for k in ("n_harmonics", "edge_periods", "band_hz")
+                         if k in options}  # fmt: skip
+        validation = validate(result.model, record_kinematics(chosen[0], **preprocessing))
         for channel in ("velocity", "acceleration"):
             figure = plotting.plot_validation_figure(validation, channel)
             path = out.with_name(f"{out.stem}_validation_{channel}.png")
@@ -177,7 +215,7 @@ def analytical_backbones(
 
 
 def criticize_campaign(
-    folder: str | os.PathLike,
+    folder: str | os.PathLike | Workspace,
     model: JointModel | str | os.PathLike,
     out: str | os.PathLike,
     *,
@@ -189,7 +227,8 @@ def criticize_campaign(
 
     ``measured`` are the campaign's backbones when already extracted (with the
     harmonics they carry); else the campaign's workspace gives them (its
-    ``backbones.csv`` when fresh, else one extraction from the records).
+    ``backbones.csv`` when fresh, else one extraction from the records);
+    ``folder`` may be that workspace.
     ``posterior`` (a DataTree) gives the predictive bands and the medians the
     model is compared at; from a hierarchical posterior these are the draws of
     the population's median assembly, so the test widens by the uncertainty of
@@ -204,7 +243,8 @@ def criticize_campaign(
     if not isinstance(model, JointModel):
         model = JointModel.from_json(model)
     if measured is None:
-        measured = Workspace(folder).backbones
+        workspace = folder if isinstance(folder, Workspace) else Workspace(folder)
+        measured = workspace.backbones
     crit = criticize(model, measured, posterior=posterior)
     for _ in range(rounds):
         proposals = crit.missing()

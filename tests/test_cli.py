@@ -155,6 +155,14 @@ def test_hand_made_records_give_the_known_backbones_and_model(hand_made, tmp_pat
     assert json.loads((crit / "criticism.json").read_text())["significant"] is False
 
 
+def test_a_record_file_is_a_campaign_of_one(hand_made, tmp_path):
+    csv = tmp_path / "one.csv"
+    assert main(["backbones", str(hand_made / "Config7_PRT_Assemb2.csv"), "--out", str(csv)]) == 0
+    table = __import__("pandas").read_csv(csv)
+    assert len(table) == 6 and set(table["curve"]) == {"Config7_PRT_Assemb2"}
+    np.testing.assert_allclose(table["frequency_hz"], 100.0, rtol=1e-6)
+
+
 def test_rig_campaign_through_every_stage(rig_campaign, tmp_path, capsys):
     assert main(["backbones", str(rig_campaign)]) == 0
     assert (rig_campaign / "backbones.csv").exists()

@@ -271,8 +271,10 @@ def single_harmonic_backbone(
     damping = np.full(shape, np.nan)
     done = np.zeros(shape, dtype=bool)
     for _ in range(max_iter):
-        k_eq, c_eq = describing_sums(a, omega, table)
-        with np.errstate(invalid="ignore"):
+        # Describing functions overflow where a term grows without bound (exp, x·ẋ² at
+        # large amplitudes): no backbone there, which the NaN below reports.
+        with np.errstate(over="ignore", invalid="ignore"):
+            k_eq, c_eq = describing_sums(a, omega, table)
             updated = np.sqrt(np.where(k_eq > 0, k_eq, np.nan))
         settled = ~done & (np.abs(updated - omega) <= rtol * updated)
         # Freeze settled points: the answer must not depend on what else is in the batch.
@@ -811,13 +813,15 @@ def backbone(
             a, table, omega, harmonics, n_time, tol, max_iter, forcing
         )
         omega = y[..., 1]
-        damping = base / (2.0 * omega**2 * a)
+        with np.errstate(over="ignore", invalid="ignore"):  # NaN or inf: not converged
+            damping = base / (2.0 * omega**2 * a)
         cos_m = np.concatenate([y[..., :1], np.broadcast_to(a, omega.shape)[..., None],
                                 y[..., 2::2]], axis=-1)  # fmt: skip
         sin_m = np.concatenate([np.zeros((*omega.shape, 2)), y[..., 3::2]], axis=-1)
         sin_m[~converged] = np.nan
         cos_m[~converged] = np.nan
-    base_acceleration = 2.0 * omega**2 * a * damping
+    with np.errstate(over="ignore", invalid="ignore"):
+        base_acceleration = 2.0 * omega**2 * a * damping
     squeeze = (lambda z: z[0]) if parameters is None else (lambda z: z)
     return HarmonicBackbone(
         amplitude_m=a,

@@ -120,6 +120,8 @@ class HoldFit:
         period-averaged channel (Hz), as the reference was refined on it (0 when the
         channel was followed as it is: it agreed, or the hold had not settled), and
         the standard error of the last estimate.
+    response_mean
+        The response signal's constant ``c₀`` over the window (its units).
     """
 
     time_s: float
@@ -136,6 +138,7 @@ class HoldFit:
     frequency_change: float
     reference_offset_hz: float
     reference_offset_standard_error_hz: float
+    response_mean: float
 
 
 def is_settled(amplitude_change: float, standard_error: float) -> bool:
@@ -351,4 +354,5 @@ def fit_hold(
         frequency_change=float(slope * duration / (omega + correction)),
         reference_offset_hz=correction / (2 * np.pi),
         reference_offset_standard_error_hz=float(offset_se / (2 * np.pi)),
+        response_mean=float(coef[0, 1]),
     )

@@ -92,6 +92,7 @@ def identify_arrays(
     offset_iterations: int = 3,
     n_harmonics: int = 3,
     edge_periods: float = 20.0,
+    band_hz: tuple[float, float] | None = None,
     labels: Sequence[str] | None = None,
 ) -> Identification:
     """Identify a joint model from velocity arrays of one or several records.
@@ -133,7 +134,7 @@ def identify_arrays(
     offset_iterations
         Mean-offset reconstructions (:func:`.library.mean_offset`) after the
         first fit; 0 disables.
-    n_harmonics, edge_periods
+    n_harmonics, edge_periods, band_hz
         Preprocessing (:func:`~identification.measurements.signals.kinematics`).
     labels
         Names of the records for error messages (file paths).
@@ -174,7 +175,7 @@ def identify_arrays(
                                              strict=True):  # fmt: skip
         try:
             kins.append(kinematics(ti, vi, bi, fi, rate, n_harmonics=n_harmonics,
-                                   edge_periods=edge_periods))  # fmt: skip
+                                   edge_periods=edge_periods, band_hz=band_hz))  # fmt: skip
         except ValueError as exc:
             raise ValueError(f"{label}: {exc}") from None
     n_effective = sum(2 * (k.band_hz[1] - k.band_hz[0]) * (k.valid.stop - k.valid.start)
