@@ -367,7 +367,7 @@ def test_a_frequency_channel_off_the_base_motion_is_refined_on_it_and_warned_abo
         point = extract_backbone(record)
     (message,) = [str(w.message) for w in caught]
     assert message.startswith("Config1_PRT_Assemb1: hold phase at level 1 (")
-    assert "frequency channel is +0.3 Hz off the base motion's own fundamental" in message
+    assert "frequency channel is +0.3 Hz off the excitation's own fundamental" in message
     assert point.frequency_hz[0] == pytest.approx(100.0, abs=1e-4)
     assert point.amplitude_m[0] == pytest.approx(1e-3, rel=1e-5)
     np.testing.assert_allclose(point.harmonics[0], [0, 0.01 * np.exp(0.4j)], atol=1e-5)
