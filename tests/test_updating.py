@@ -233,7 +233,7 @@ def test_hierarchical_model_is_calibrated_on_pll_campaigns():
     coverage = population_coverage(
         DUFFING, NAMES, np.geomspace(0.3, 5.0, 8), 1e-3 * np.geomspace(0.12, 1.1, 6),
         n_campaigns=5, n_curves=6, location_scale=0.02, population_scale=0.05,
-        channels=("frequency_hz",), draws=300, tune=300, progress=False,
+        channels=("frequency_hz",), draws=300, tune=800, progress=False,
     )  # fmt: skip
     print(coverage)
     assert coverage.bounds() == (3, 5)  # Binomial(5, 0.9): P(X ≤ 2) = 0.0086
