@@ -8,6 +8,7 @@ from functools import cache
 import numpy as np
 import pytest
 import xarray as xr
+from oscillators import measured_curve
 
 from identification.analytical.harmonic import backbone as harmonic_backbone
 from identification.criticism.criticism import criticize
@@ -41,14 +42,7 @@ def population(truth: JointModel, n=3, k_spread=0.005, noise_hz=0.003, noise_zet
     for i in range(n):
         model = truth.replace(linear_stiffness=K0 * np.exp(k_spread * rng.standard_normal()))
         hb = harmonic_backbone(model, AMPS)
-        curves.append(
-            Backbone(
-                hb.amplitude_m,
-                hb.frequency_hz + noise_hz * rng.standard_normal(AMPS.size),
-                hb.damping_ratio + noise_zeta * rng.standard_normal(AMPS.size),
-                label=f"assembly{i}",
-            )
-        )
+        curves.append(measured_curve(hb, rng, noise_hz, noise_zeta, f"assembly{i}"))
     return BackboneSet(curves)
 
 

@@ -5,12 +5,13 @@ import dataclasses
 
 import numpy as np
 import pytest
+from oscillators import measured_curve
 from scipy import stats
 
 from identification.analytical.harmonic import backbone as harmonic_backbone
 from identification.fitting.data import NOISE_FLOOR, fit_data, measurement_levels
 from identification.fitting.least_squares import evaluate, fit_backbones
-from identification.measurements.backbone import Backbone, BackboneSet
+from identification.measurements.backbone import BackboneSet
 from identification.model import JointModel
 
 W0 = 2 * np.pi * 101.0
@@ -29,14 +30,7 @@ def curves(models, amplitudes=AMPS, method="multi", noise_hz=0.0, noise_zeta=0.0
     for i, m in enumerate(models):
         hb = harmonic_backbone(m, amplitudes, method=method)
         assert hb.converged.all()
-        out.append(
-            Backbone(
-                hb.amplitude_m,
-                hb.frequency_hz + noise_hz * rng.standard_normal(amplitudes.size),
-                hb.damping_ratio + noise_zeta * rng.standard_normal(amplitudes.size),
-                label=f"c{i}",
-            )
-        )
+        out.append(measured_curve(hb, rng, noise_hz, noise_zeta, f"c{i}"))
     return BackboneSet(out)
 
 
