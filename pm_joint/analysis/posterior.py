@@ -48,9 +48,7 @@ def posterior_samples(
             raise ValueError(f"posterior draws must be (n_draws, {len(keys)}), got {draws.shape}")
         table = dict(zip(keys, draws.T, strict=True))
     else:
-        if hasattr(posterior, "children") and "posterior" in posterior.children:
-            posterior = posterior["posterior"].to_dataset()
-        variables = getattr(posterior, "data_vars", posterior)
+        variables = _variables(posterior)
         if not isinstance(variables, Mapping):
             raise ValueError(
                 f"posterior must be a DataTree, Dataset, mapping or (names, draws), "
@@ -76,13 +74,19 @@ def posterior_samples(
     return wanted, draws[keep]
 
 
+def _variables(posterior: Any) -> Any:
+    """The variables of a posterior: a DataTree's ``posterior`` group, a Dataset's data
+    variables, or the object itself (a mapping)."""
+    if hasattr(posterior, "children") and "posterior" in posterior.children:
+        posterior = posterior["posterior"].to_dataset()
+    return getattr(posterior, "data_vars", posterior)
+
+
 def _posterior_kind(posterior: Any) -> str:
     """``"mean"`` for a hierarchical posterior (its ``{p}_population`` draws are of the
     population's median assembly), else ``"population"`` (draws spread like the assemblies,
     as population matching gives): the criticism widens its test accordingly."""
-    if hasattr(posterior, "children") and "posterior" in posterior.children:
-        posterior = posterior["posterior"].to_dataset()
-    variables = getattr(posterior, "data_vars", posterior)
+    variables = _variables(posterior)
     if isinstance(variables, Mapping) and any(
         str(k).endswith(POPULATION_SUFFIX) for k in variables
     ):
