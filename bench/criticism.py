@@ -14,8 +14,8 @@ hidden), each through the criticism loop. Prints the table, the false discoverie
 the null scenarios, the hit rate of the hidden ones and the verdicts of the
 out-of-catalogue ones, each with its two-sided 95 % Clopper–Pearson interval.
 
-``--fdr N``: N fast null campaigns (harmonic-balance assemblies, 1/3/5/25 curves, five
-truths, per-assembly parameter scatter and noise, 5–10 levels; each drawing levels
+``--fdr N``: N fast null campaigns (harmonic-balance assemblies, 1/3/5/10 curves, five
+truths, per-assembly parameter scatter and noise, 5–8 levels; each drawing levels
 stepped up and down, a distorting shaker and the controller ripple's leak with
 probability ½: :data:`pm_joint.studies.NULL_CONDITIONS`), each through the whole
 decision: the false-discovery rate with its Clopper–Pearson interval, per curve count

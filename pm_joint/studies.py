@@ -452,7 +452,7 @@ def null_study(
     campaigns: int,
     *,
     truths: Sequence[str] = tuple(NULL_TRUTHS),
-    curve_counts: Sequence[int] = (1, 3, 5, 25),
+    curve_counts: Sequence[int] = (1, 3, 5, 10),
     seed: int = 0,
     progress: Callable[[dict], None] | None = None,
     **options: Any,
@@ -463,7 +463,7 @@ def null_study(
     :func:`identification.criticism.criticism.criticize`.
 
     Each campaign draws its lab conditions (:data:`NULL_CONDITIONS`, each present with
-    probability ½, and 5, 7 or 10 levels per branch) from its own seed, so a run of any
+    probability ½, and 5, 6 or 8 levels per branch) from its own seed, so a run of any
     length mixes clean and artefact-laden campaigns over every truth and curve count.
     """
     rows = []
@@ -474,7 +474,7 @@ def null_study(
         began = time.perf_counter()
         draw = np.random.default_rng([seed, k, 7])
         present = [name for name in NULL_CONDITIONS if draw.uniform() < 0.5]
-        levels = int(draw.choice([5, 7, 10]))
+        levels = int(draw.choice([5, 6, 8]))
         conditions = {o: v for name in present for o, v in NULL_CONDITIONS[name].items()}
         measured = simulated_campaign(
             truth, n_curves, seed=seed * 100_003 + k, levels=levels, **conditions

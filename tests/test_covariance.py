@@ -48,9 +48,10 @@ def correlations(covariances: np.ndarray) -> np.ndarray:
 def test_few_curves_keep_the_correlation_along_the_levels_and_only_that():
     """Five curves (200 campaigns): of independent noise, the estimated correlations stay
     near zero; of assembly offsets (AR(1) ρ = 0.9 along the levels, 0.3 between the
-    channels), the estimate keeps them: lag-1 correlation near 0.9 (the stationary
-    target tapers it by (L − 1)/L = 7/8: 0.79), between channels near 0.3. A target of
-    zero correlation kept about a third of the lag-1 correlation. Positive definite."""
+    channels), the estimate keeps the correlation along the levels: lag-1 near 0.9 (the
+    stationary target tapers it by (L − 1)/L = 7/8: 0.79; a target of zero correlation
+    kept about a third of it); between channels, not pooled, it shrinks toward zero.
+    Positive definite."""
     independent = np.diag(np.diag(truth_covariance()))
     estimated, _, _ = shrunk_covariance(draw(independent, 5, 200, seed=1), CHANNEL_OF,
                                         np.zeros(P))  # fmt: skip
@@ -64,7 +65,7 @@ def test_few_curves_keep_the_correlation_along_the_levels_and_only_that():
     lag1 = np.mean([r[:, i + c, i + CHANNELS + c] for i in levels for c in range(CHANNELS)])
     across = np.mean([r[:, i, i + 1] for i in np.arange(LEVELS) * CHANNELS])
     assert 0.7 < lag1 < 0.9, lag1
-    assert 0.2 < across < 0.4, across
+    assert 0.0 < across < 0.3, across
     for matrix in (*estimated[:5], *correlated[:5]):
         np.linalg.cholesky(matrix)
 

@@ -7,10 +7,11 @@ is stiffer at every level), so the points of one curve are *not* independent: th
 mean curve ``Ȳ`` has covariance ``Σ/n`` with ``Σ`` the between-curve covariance of
 whole curves. With a handful of curves (``n ≪ p``) the sample covariance is
 singular, so it is shrunk (Schäfer & Strimmer 2005, with the data-driven intensity):
-the correlations toward a target stationary along the levels (:func:`along_levels_target`:
-the correlation of two channels depends on their level distance only, pooled over
-the levels, which keeps the strong correlation of an assembly's offsets along the
-curve that a target of zero correlation shrinks away with few curves), the variances
+the correlations toward a target stationary along the levels
+(:func:`along_levels_target`: within a channel the correlation depends on the level
+distance only, pooled over the levels, which keeps the strong correlation of an
+assembly's offsets along the curve that a target of zero correlation shrinks away with
+few curves; zero between channels), the variances
 of each channel toward its median over the levels (Opgen-Rhein & Strimmer 2007); and
 floored by the hold fits' own standard errors.
 
@@ -170,17 +171,19 @@ def shrunk_covariance(
 
 
 def along_levels_target(correlation: np.ndarray, channel_of: np.ndarray) -> np.ndarray:
-    """Shrinkage target of the correlations: stationary along the levels, the correlation
-    of channels ``c`` and ``d`` a function of their level distance only.
+    """Shrinkage target of the correlations: within each channel stationary along the
+    levels (a function of the level distance only), between channels zero.
 
     An assembly's offsets move every level of a channel together (a stiffer assembly is
-    stiffer at every amplitude, and may damp differently too), so neighbouring levels
-    of a curve are strongly correlated; a target of zero correlation shrinks that away
-    with few curves, and a bootstrap drawn from the shrunk estimate then under-disperses
-    the smooth directions the candidates test. The target's correlation of ``c`` at
-    level ``l`` with ``d`` at ``l + k`` pools every such pair of levels, divided by the
-    number of levels (the biased, Bartlett cross-correlation: the sum of each curve's
-    own, so the target is positive definite; long distances are tapered toward zero).
+    stiffer at every amplitude), so neighbouring levels of a curve are strongly
+    correlated; a target of zero correlation shrinks that away with few curves, and a
+    bootstrap drawn from the shrunk estimate then under-disperses the smooth directions
+    the candidates test. The target's correlation of a channel at levels ``l`` and
+    ``l + k`` pools every such pair, divided by the number of levels (the biased,
+    Bartlett autocorrelation: the sum of each curve's own, so every channel's block is
+    positive definite; long distances are tapered toward zero). Correlations between
+    channels are not pooled: a block-Toeplitz target across channels has rank at most
+    ``n·(2L − 1)``, singular with few curves and several channels.
 
     Parameters
     ----------
@@ -193,17 +196,19 @@ def along_levels_target(correlation: np.ndarray, channel_of: np.ndarray) -> np.n
     -------
     ``(batch, p, p)`` target correlations (unit diagonal).
     """
-    channels = np.unique(channel_of)
-    levels = channel_of.size // channels.size
-    grid = correlation.reshape(-1, levels, channels.size, levels, channels.size)
-    offsets = np.arange(-(levels - 1), levels)
-    # pooled[b, c, d, k]: the mean over l of the correlation of (l, c) with (l + k, d)
+    channels = np.unique(channel_of).size
+    levels = channel_of.size // channels
+    grid = correlation.reshape(-1, levels, channels, levels, channels)
+    within = np.diagonal(grid, axis1=2, axis2=4)  # (batch, l, l', c)
+    # pooled[b, k, c]: the mean over l of the correlation of (l, c) with (l + k, c), k ≥ 0
     pooled = np.stack(
-        [np.trace(grid, offset=k, axis1=1, axis2=3) / levels for k in offsets], axis=-1
+        [np.trace(within, offset=k, axis1=1, axis2=2) / levels for k in range(levels)], axis=1
     )
-    distance = np.arange(levels)[None, :] - np.arange(levels)[:, None] + levels - 1
-    target = pooled[:, :, :, distance]  # (batch, c, d, l, l')
-    target = np.transpose(target, (0, 3, 1, 4, 2)).reshape(correlation.shape)
+    distance = np.abs(np.arange(levels)[:, None] - np.arange(levels)[None, :])
+    target = np.zeros_like(grid)
+    for c in range(channels):
+        target[:, :, c, :, c] = pooled[:, distance, c]
+    target = target.reshape(correlation.shape)
     target[:, np.arange(channel_of.size), np.arange(channel_of.size)] = 1.0
     return target
 
