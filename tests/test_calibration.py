@@ -8,6 +8,12 @@ like assembly offsets are), the covariance is re-estimated from those curves as 
 analysis does, and a fresh bootstrap sets the thresholds. The directions (the base
 model's, every catalogue column, the free-form basis) are those of a real criticism
 of a harmonic-balance campaign.
+
+Five curves correlated along the levels (ρ = 0.8) once fired 47 of 150 at α = 0.1: the
+covariance was shrunk toward zero correlation, so the bootstrap drew its campaigns from
+a world with little correlation along the curve while the smooth directions the
+candidates test carry most of the real scatter. The target is now stationary along the
+levels (:func:`identification.fitting.covariance.along_levels_target`).
 """
 
 import dataclasses
