@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 from identification.measurements.records import write_record
-from identification.rig import Rig
+from identification.rig import Rig, rig_for_preset
 
 LEVELS = 10
 LAB_PRESETS = ("lab-pure", "lab-all", "lab-iwan", "lab-second-mode")
@@ -65,7 +65,7 @@ def main() -> None:
     wall, cpu = _best(ideal_record, args.repeats)
     figures["ideal_rig_record_s"] = round(wall, 3)
     figures["ideal_rig_record_cpu_s"] = round(cpu, 3)
-    rigs = {p: Rig.preset(p, levels=LEVELS, schedule="up") for p in LAB_PRESETS}
+    rigs = {p: rig_for_preset(p, levels=LEVELS, schedule="up") for p in LAB_PRESETS}
     for preset, rig in rigs.items():
         rig.campaign(assemblies=1)  # compile
         wall, cpu = _best(lambda rig=rig: rig.campaign(assemblies=1), args.repeats)

@@ -14,7 +14,7 @@ backbones on 41 excitation levels, amplitude and frequency: the paper's layout,
 with a smaller network than the paper's; sizes printed), its levels reaching
 0.03–3 mm on the nominal model so that the whole box covers the measured range.
 
-Runs, each a fresh :func:`pm_joint.updating.sample` call with 2 chains on the
+Runs, each a fresh :func:`pm_joint.sample` call with 2 chains on the
 2 cores, run lengths chosen so that fixed costs (compilation, process start)
 weigh alike:
 
@@ -55,7 +55,7 @@ from identification.analytical.pll import pll_backbones
 from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.rig import RIG_PRESETS, Rig
-from pm_joint.updating import build_model, sample
+from pm_joint.inference import build_model, sample
 from surrogates import (
     NetConfig,
     SurrogateRuntime,

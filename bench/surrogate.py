@@ -36,8 +36,9 @@ import torch
 
 from identification.fitting.least_squares import default_free
 from identification.rig import RIG_PRESETS
+from pm_joint.studies import table5_study
 from surrogates.dataset import generate_dataset
-from surrogates.evaluate import PAPER_TABLE5, backbone_metrics, table5_study
+from surrogates.evaluate import PAPER_TABLE5, backbone_metrics
 from surrogates.export import export_surrogate
 from surrogates.runtime import SurrogateRuntime
 from surrogates.train import TrainingConfig, train_surrogate

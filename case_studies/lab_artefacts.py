@@ -44,7 +44,7 @@ from identification.criticism.criticism import criticize
 from identification.criticism.plots import plot_comparison
 from identification.fitting.least_squares import fit_backbones
 from identification.measurements.extraction import extract_backbones
-from identification.rig import RIG_PRESETS, Rig
+from identification.rig import RIG_PRESETS, rig_for_preset
 
 SMALL = os.environ.get("PM_JOINT_SIZE") == "small"
 OUT = os.environ.get("PM_JOINT_OUT", "case_study_output")
@@ -76,7 +76,7 @@ for name in NULL + OUT_OF_CATALOGUE:
 rows, criticisms = [], {}
 for name in NULL + OUT_OF_CATALOGUE:
     start_s = time.perf_counter()
-    rig = Rig.preset(name, levels=LEVELS, hold_s=HOLD_S)
+    rig = rig_for_preset(name, levels=LEVELS, hold_s=HOLD_S)
     records = [record for record, _ in rig.campaign(assemblies=ASSEMBLIES, seed=SEED)]
     measured = extract_backbones(records)
     start = fit_backbones(RIG_PRESETS[name].base_model, measured).model

@@ -20,7 +20,7 @@
 # Metropolis–Hastings against 25 measured backbones. Here the test is the
 # virtual rig (`trc-like`: softening by partial slip, then hardening by
 # membrane stretching; assembly-to-assembly scatter), and every stage is one
-# call of `pm_joint.pipeline`.
+# call of `pm_joint.pipeline` on one workspace, which reads each record once.
 #
 # `PM_JOINT_SIZE=small` runs a quick version (4 assemblies, a small surrogate,
 # a short chain).
@@ -33,10 +33,9 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-from identification.fitting.least_squares import default_free
-from identification.measurements.records import Campaign
 from identification.sindy import PAPER_LIBRARY
 from pm_joint import pipeline
+from pm_joint.workspace import Workspace
 
 SMALL = os.environ.get("PM_JOINT_SIZE") == "small"
 OUT = Path(os.environ.get("PM_JOINT_OUT", "case_study_output"))
@@ -48,8 +47,9 @@ ASSEMBLIES = 4 if SMALL else 25
 
 # %%
 records = OUT / "trc_records"
-pipeline.write_rig_campaign("trc-like", records, assemblies=ASSEMBLIES, levels=10, seed=1)
-measured = pipeline.campaign_backbones(records, OUT / "trc_backbones.csv")
+pipeline.write_rig_campaign("trc-like", records, assemblies=ASSEMBLIES, n_levels=10, seed=1)
+workspace = Workspace(records, backbones_csv=OUT / "trc_backbones.csv")
+measured = pipeline.campaign_backbones(workspace)
 low, high = measured.common_range()
 print(f"{len(measured)} backbones; shared amplitude range "
       f"{1e3 * low:.3f}–{1e3 * high:.3f} mm")  # fmt: skip
@@ -59,7 +59,7 @@ print(f"{len(measured)} backbones; shared amplitude range "
 
 # %%
 identification = pipeline.identify_campaign(
-    records, PAPER_LIBRARY, records=3, out=OUT / "trc_model.json"
+    workspace, PAPER_LIBRARY, n_records=3, out=OUT / "trc_model.json"
 )
 model = identification.model
 print(identification.summary())
@@ -68,7 +68,7 @@ print(identification.summary())
 # ## 3. Analytical backbones: PLL simulation and harmonic balance (section 5, Fig. 12)
 
 # %%
-curves = pipeline.analytical_backbones(model, measured, OUT / "trc_analytical.png")
+curves = pipeline.analytical_backbones(workspace, OUT / "trc_analytical.png")
 for name, curve in curves.items():
     print(f"{name}: {len(curve)} points, {curve.frequency_hz.min():.2f}–"
           f"{curve.frequency_hz.max():.2f} Hz")  # fmt: skip
@@ -77,9 +77,9 @@ for name, curve in curves.items():
 # ## 4. The surrogate (section 6): measured curves labelled record by record
 
 # %%
-labels = pipeline.record_labels(list(Campaign(records)), model, default_free(model))
+labels = pipeline.label_records(workspace)
 runtime = pipeline.train_surrogate_stage(
-    measured, model, OUT / "trc_surrogate", labels=labels,
+    workspace, OUT / "trc_surrogate", labels=labels,
     n_curves=80 if SMALL else 500, max_epochs=20 if SMALL else None, progress=False,
 )  # fmt: skip
 print(runtime.metadata.get("metrics"))
@@ -89,11 +89,13 @@ print(runtime.metadata.get("metrics"))
 
 # %%
 idata = pipeline.update_backbones(
-    measured, model, OUT / "trc_posterior.nc", forward="surrogate",
-    surrogate=OUT / "trc_surrogate", draws=800 if SMALL else 30_000,
-    tune=400 if SMALL else 2_000, chains=1 if SMALL else 2, report_dir=OUT / "trc_report",
+    workspace, OUT / "trc_posterior.nc", forward="surrogate", draws=800 if SMALL else 30_000,
+    tune=400 if SMALL else 2_000, chains=1 if SMALL else 2,
 )  # fmt: skip
-print((OUT / "trc_report" / "report.json").read_text()[:1500])
+content = pipeline.posterior_report(workspace, OUT / "trc_report")
+print(content["summary"])
+print({level: entry["distances"] for level, entry in content["level_pdfs"].items()})
+print(f"records read: {workspace.records.reads}")
 
 # %% [markdown]
 # The paper saw the sampled PDF shift at mid amplitude and blamed model-form

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,7 +27,7 @@ from identification.effects import (
     restoring_force,
 )
 
-__all__ = ["PRESETS", "JointModel", "Term"]
+__all__ = ["PRESETS", "JointModel", "Term", "parameter_bounds"]
 
 FORMAT = "pm-joint/JointModel"
 FORMAT_VERSION = 1
@@ -402,3 +402,55 @@ def _pandey2025() -> dict[str, float]:
 
 #: Named models. ``pandey2025`` is the paper's identified Eq. 3.
 PRESETS: dict[str, dict[str, Any]] = {"pandey2025": _pandey2025()}
+
+
+def parameter_bounds(
+    model: JointModel,
+    names: Sequence[str],
+    relative_spread: float | Mapping[str, float] = 0.2,
+) -> np.ndarray:
+    """``(n_params, 2)`` box ``value ± relative_spread·|value|`` around the model's parameters.
+
+    The one box every stage draws around a model: the surrogate's training data
+    and the updating's uniform priors. Rows are in the order of ``names``, each
+    ``(low, high)`` whatever the sign of the value.
+
+    Parameters
+    ----------
+    model
+        The model whose parameter values are the centres.
+    names
+        Parameter names (:attr:`JointModel.parameter_names`).
+    relative_spread
+        One relative spread for every name, or one per name.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name, a spread that is missing, not finite or not > 0,
+        a parameter that is zero (a relative box around it is empty: give its
+        bounds), and a shape parameter (a name with a dot, e.g.
+        ``microslip.F_s``, which must stay positive) with a spread of 1 or more.
+    """
+    values = model.parameters
+    rows = []
+    for name in names:
+        if name not in values:
+            raise ValueError(f"unknown parameter {name!r}; the model has {model.parameter_names}")
+        spread = (
+            relative_spread.get(name) if isinstance(relative_spread, Mapping) else relative_spread
+        )
+        if spread is None:
+            raise ValueError(f"spread: no relative spread given for parameter {name!r}")
+        if not (math.isfinite(spread) and spread > 0):
+            raise ValueError(f"spread of parameter {name!r} must be finite and > 0, got {spread}")
+        value = values[name]
+        if value == 0:
+            raise ValueError(
+                f"parameter {name!r} is 0 in the model: a relative spread gives an empty box; "
+                "pass its bounds"
+            )
+        if "." in name and spread >= 1:
+            raise ValueError(f"shape parameter {name!r} must stay > 0: spread {spread} must be < 1")
+        rows.append(sorted((value - spread * abs(value), value + spread * abs(value))))
+    return np.array(rows, dtype=float)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -48,38 +49,38 @@ def _cmd_rig(args: argparse.Namespace) -> None:
 
     campaign = write_rig_campaign(
         args.preset, args.out, assemblies=args.assemblies, runs=args.runs, seed=args.seed,
-        levels=args.levels, workers=args.workers,
+        n_levels=args.levels, workers=args.workers,
     )  # fmt: skip
     print(f"wrote {len(campaign)} record(s) of rig preset {args.preset!r} to {args.out}")
 
 
 def _cmd_backbones(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import campaign_backbones
+    from pm_joint.workspace import Workspace
 
-    out = args.out or f"{args.dir.rstrip('/')}/backbones.csv"
-    backbones = campaign_backbones(args.dir, out, n_periods=args.periods)
-    print(f"extracted {len(backbones)} backbone(s) to {out}")
+    workspace = Workspace(args.dir, backbones_csv=args.out, n_periods=args.periods)
+    backbones = campaign_backbones(workspace)
+    print(f"extracted {len(backbones)} backbone(s) to {workspace.backbones_csv}")
 
 
 def _cmd_identify(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import identify_campaign
+    from pm_joint.workspace import Workspace
 
-    result = identify_campaign(args.dir, args.effects, records=args.records, out=args.out)
+    workspace = Workspace(args.dir)
+    result = identify_campaign(workspace, args.effects, n_records=args.records, out=args.out)
     print(result.summary())
     print(result.model.equation())
     print(f"wrote {args.out}")
 
 
 def _cmd_train_surrogate(args: argparse.Namespace) -> None:
-    from identification.fitting.least_squares import default_free
-    from identification.measurements.records import Campaign
-    from pm_joint.pipeline import campaign_backbones, record_labels, train_surrogate_stage
+    from pm_joint.pipeline import label_records, train_surrogate_stage
+    from pm_joint.workspace import Workspace
 
-    model = JointModel.from_json(args.model)
-    measured = campaign_backbones(args.dir)
-    labels = record_labels(list(Campaign(args.dir)), model, default_free(model))
+    workspace = Workspace(args.dir, model=args.model)
     runtime = train_surrogate_stage(
-        measured, model, args.out, labels=labels, n_curves=args.curves,
+        workspace, args.out, labels=label_records(workspace), n_curves=args.curves,
         max_epochs=args.epochs, seed=args.seed,
     )  # fmt: skip
     print(f"wrote {args.out}/surrogate.onnx for parameters {', '.join(runtime.parameter_names)}")
@@ -94,28 +95,31 @@ def _cmd_criticize(args: argparse.Namespace) -> None:
 
 
 def _cmd_update(args: argparse.Namespace) -> None:
-    from pm_joint.pipeline import load_backbones, update_backbones
+    from pm_joint.pipeline import posterior_report, update_backbones
+    from pm_joint.workspace import Workspace
 
     if args.forward == "surrogate" and not args.surrogate:
         raise ValueError("--forward surrogate needs --surrogate SURROGATE_DIR")
     if args.forward != "surrogate" and not args.model:
         raise ValueError(f"--forward {args.forward} needs --model model.json")
-    model = JointModel.from_json(args.model) if args.model else None
+    workspace = Workspace(args.dir, model=args.model, surrogate=args.surrogate)
     update_backbones(
-        load_backbones(args.dir), model, args.out, forward=args.forward,
-        surrogate=args.surrogate, sampler=args.sampler, draws=args.draws, tune=args.tune,
-        chains=args.chains, seed=args.seed, report_dir=args.report,
+        workspace, args.out, forward=args.forward, sampler=args.sampler, draws=args.draws,
+        tune=args.tune, chains=args.chains, seed=args.seed,
         trace=args.trace or Path(args.out).with_suffix(".zarr"), resume=args.resume,
     )  # fmt: skip
     print(f"wrote {args.out}")
+    if args.report:
+        posterior_report(workspace, args.report)
+        print(f"wrote {args.report}/report.json")
 
 
 def _cmd_report(args: argparse.Namespace) -> None:
-    from pm_joint.pipeline import load_backbones, run_report
+    from pm_joint.pipeline import run_report
+    from pm_joint.workspace import Workspace
 
-    index = run_report(
-        load_backbones(args.dir), args.out, posterior=args.posterior, criticism=args.criticism
-    )
+    workspace = Workspace(args.dir, posterior=args.posterior)
+    index = run_report(workspace, args.out, criticism=args.criticism)
     print(f"wrote {index}")
 
 
@@ -229,12 +233,20 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``pm-joint`` command."""
     args = build_parser().parse_args(argv)
+    formatwarning = warnings.formatwarning
+
+    def one_line(message, category, *_, **__) -> str:
+        return f"pm-joint {args.command}: {category.__name__}: {message}\n"
+
+    warnings.formatwarning = one_line  # a warning is one line, as an error is
     try:
         args.func(args)
     except (ValueError, FileNotFoundError, NotADirectoryError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"pm-joint {args.command}: error: {reason}", file=sys.stderr)
         return 2
+    finally:
+        warnings.formatwarning = formatwarning
     return 0
 
 

@@ -15,7 +15,8 @@ from identification.artifacts import atomic_write_text
 from identification.model import JointModel
 from identification.sindy import PAPER_LIBRARY
 from pm_joint import pipeline
-from pm_joint.html import Section, write_index
+from pm_joint.html import Section, criticism_section, posterior_sections, write_index
+from pm_joint.workspace import Workspace
 
 
 @dataclass(frozen=True)
@@ -23,7 +24,7 @@ class DemoSize:
     """How big the demo runs: the paper's size, or a quick check for CI."""
 
     assemblies: int
-    levels: int
+    n_levels: int
     sindy_records: int
     surrogate_curves: int
     surrogate_epochs: int | None
@@ -37,11 +38,11 @@ class DemoSize:
 #: Metropolis samples (two chains of 15 000 on the two cores).
 SIZES = {
     "full": DemoSize(
-        assemblies=25, levels=10, sindy_records=3, surrogate_curves=500, surrogate_epochs=None,
+        assemblies=25, n_levels=10, sindy_records=3, surrogate_curves=500, surrogate_epochs=None,
         draws=15_000, tune=2_000, chains=2, criticism_rounds=2,
     ),
     "small": DemoSize(
-        assemblies=4, levels=10, sindy_records=3, surrogate_curves=60, surrogate_epochs=15,
+        assemblies=4, n_levels=10, sindy_records=3, surrogate_curves=60, surrogate_epochs=15,
         draws=600, tune=300, chains=1, criticism_rounds=1,
     ),
 }  # fmt: skip
@@ -93,9 +94,10 @@ def run_demo(out: str | Path = "demo_out", size: str = "full", workers: int | No
 
     stages.run(
         "virtual campaign", pipeline.write_rig_campaign, "trc-like", records,
-        assemblies=cfg.assemblies, levels=cfg.levels, seed=0, workers=workers,
+        assemblies=cfg.assemblies, n_levels=cfg.n_levels, seed=0, workers=workers,
     )  # fmt: skip
-    measured = stages.run("backbones", pipeline.campaign_backbones, records, out / "backbones.csv")
+    workspace = Workspace(records, backbones_csv=out / "backbones.csv")
+    measured = stages.run("backbones", pipeline.campaign_backbones, workspace)
     stages.sections.append(
         Section(
             "Measured backbones",
@@ -107,8 +109,8 @@ def run_demo(out: str | Path = "demo_out", size: str = "full", workers: int | No
     )
 
     identification = stages.run(
-        "SINDy identification", pipeline.identify_campaign, records, DEMO_LIBRARY,
-        records=cfg.sindy_records, out=out / "model.json",
+        "SINDy identification", pipeline.identify_campaign, workspace, DEMO_LIBRARY,
+        n_records=cfg.sindy_records, out=out / "model.json",
     )  # fmt: skip
     model: JointModel = identification.model
     stages.sections.append(
@@ -128,9 +130,8 @@ def run_demo(out: str | Path = "demo_out", size: str = "full", workers: int | No
     )
 
     stages.run(
-        "analytical backbones", pipeline.analytical_backbones, model, measured,
-        out / "analytical.png",
-    )  # fmt: skip
+        "analytical backbones", pipeline.analytical_backbones, workspace, out / "analytical.png"
+    )
     stages.sections.append(
         Section(
             "Analytical backbones",
@@ -140,15 +141,10 @@ def run_demo(out: str | Path = "demo_out", size: str = "full", workers: int | No
         )
     )
 
-    from identification.fitting.least_squares import default_free
-    from identification.measurements.records import Campaign
-
-    labels = stages.run(
-        "per-record labels", pipeline.record_labels, list(Campaign(records)), model,
-        default_free(model),
-    )  # fmt: skip
+    labels = stages.run("per-record labels", pipeline.label_records, workspace)
+    workspace.release_records()  # about 1 GB at full size; no later stage reads them from here
     runtime = stages.run(
-        "surrogate", pipeline.train_surrogate_stage, measured, model, out / "surrogate",
+        "surrogate", pipeline.train_surrogate_stage, workspace, out / "surrogate",
         labels=labels, n_curves=cfg.surrogate_curves, max_epochs=cfg.surrogate_epochs, seed=0,
     )  # fmt: skip
     metrics = runtime.metadata.get("metrics", {})
@@ -168,18 +164,20 @@ def run_demo(out: str | Path = "demo_out", size: str = "full", workers: int | No
     )
 
     idata = stages.run(
-        "stochastic updating", pipeline.update_backbones, measured, model,
-        out / "posterior.nc", forward="surrogate", surrogate=out / "surrogate",
-        sampler="metropolis", draws=cfg.draws, tune=cfg.tune, chains=cfg.chains,
-        report_dir=out / "posterior",
+        "stochastic updating", pipeline.update_backbones, workspace, out / "posterior.nc",
+        forward="surrogate", sampler="metropolis", draws=cfg.draws, tune=cfg.tune,
+        chains=cfg.chains,
     )  # fmt: skip
-    stages.sections += pipeline.posterior_sections(out / "posterior", out)
+    content = stages.run(
+        "posterior report", pipeline.posterior_report, workspace, out / "posterior"
+    )
+    stages.sections += posterior_sections(content, out / "posterior", out)
 
     crit = stages.run(
         "model criticism", pipeline.criticize_campaign, records, model, out / "criticism",
         rounds=cfg.criticism_rounds, measured=measured, posterior=idata,
     )  # fmt: skip
-    stages.sections.append(pipeline.criticism_section(out / "criticism", out))
+    stages.sections.append(criticism_section(crit.to_dict(), out / "criticism", out))
     print(crit.summary())
 
     stages.sections.append(Section("Timings", tables=[("stage times (s)", [stages.timings])]))

@@ -1,7 +1,9 @@
 """A static HTML page for a run: sections of text, tables and figures.
 
 No network, no scripts: the page only links files that sit beside it, so the
-folder can be zipped and opened anywhere.
+folder can be zipped and opened anywhere. Sections are built from what the
+stages return (the posterior report's content, a criticism's record), not from
+files read back.
 """
 
 from __future__ import annotations
@@ -12,10 +14,17 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from identification.artifacts import atomic_write_text
 
-__all__ = ["Section", "missing_links", "write_index"]
+__all__ = [
+    "Section",
+    "criticism_section",
+    "missing_links",
+    "posterior_sections",
+    "write_index",
+]
 
 _STYLE = """
 body { font-family: system-ui, sans-serif; max-width: 1100px; margin: 2em auto; padding: 0 1em;
@@ -94,6 +103,84 @@ def _section(section: Section) -> str:
         )
         parts.append(f"<p>Data: {links}</p>")
     return "\n".join(parts)
+
+
+#: Columns of the posterior summary shown on the page.
+_SUMMARY_COLUMNS = ("variable", "index", "mean", "sd", "eti94_lb", "eti94_ub", "ess_bulk", "r_hat")
+
+
+def posterior_sections(
+    content: Mapping[str, Any], folder: str | os.PathLike, page_folder: str | os.PathLike
+) -> list[Section]:
+    """Sections of a posterior report: ``content`` is what :func:`pm_joint.report_folder.report`
+    returned for its folder ``folder``."""
+    rel = Path(os.path.relpath(folder, page_folder))
+    files = [f for f in content["files"] if f.endswith(".png")]
+    summary_rows = [
+        {k: v for k, v in row.items() if k in _SUMMARY_COLUMNS} for row in content["summary"]
+    ]
+    pdf_rows = [
+        {
+            "level": level,
+            "amplitude_mm": entry.get("amplitude_mm"),
+            "measured_family": entry["measured_fit"]["family"],
+            "sampled_family": entry["sampled_fit"]["family"],
+            "ks_statistic": entry["distances"]["ks_statistic"],
+            "ks_pvalue": entry["distances"]["ks_pvalue"],
+            "wasserstein_hz": entry["distances"]["wasserstein"],
+        }
+        for level, entry in content["level_pdfs"].items()
+    ]
+    sampler = content.get("sampler", {})
+    return [
+        Section(
+            "Stochastic updating",
+            f"Sampler: {sampler.get('sampler')}, {sampler.get('draws')} draws × "
+            f"{sampler.get('chains')} chains; mean acceptance {sampler.get('acceptance_rate')}.",
+            tables=[("posterior summary", summary_rows)],
+            figures=[(str(rel / f), f.removesuffix(".png").replace("_", " ")) for f in files],
+            files=[(str(rel / "report.json"), "report.json")],
+        ),
+        Section(
+            "PDFs at low, mid and high amplitude",
+            "Measured against sampled frequencies, each with its best-fitting distribution "
+            "family (AIC) and the distances between them (the paper's Fig. 22).",
+            tables=[("per amplitude level", pdf_rows)],
+        ),
+    ]
+
+
+def criticism_section(
+    content: Mapping[str, Any], folder: str | os.PathLike, page_folder: str | os.PathLike
+) -> Section:
+    """Section of a criticism: ``content`` is its record (``Criticism.to_dict()``, or the
+    ``criticism.json`` of an earlier run) and ``folder`` where its figures were written."""
+    rel = Path(os.path.relpath(folder, page_folder))
+    verdict = (
+        "Something significant is missing." if content["significant"]
+        else "Nothing significant missing."
+    )  # fmt: skip
+    fails = "; ".join(r.get("text", str(r)) for r in content.get("fails_at", [])) or "nowhere"
+    return Section(
+        "Model criticism",
+        f"{verdict} Where the model fails: {fails}.",
+        tables=[
+            ("ranked missing effects", content["ranking"]),
+            (
+                "error history",
+                [
+                    {k: v for k, v in step.items() if not isinstance(v, (list, dict))}
+                    for step in content.get("history", [])
+                ],
+            ),
+        ],
+        figures=[
+            (str(rel / "comparison.png"), "measured vs predicted, residual bands"),
+            (str(rel / "signatures.png"), "residual beside the top candidates' signatures"),
+            (str(rel / "history.png"), "the error along the loop"),
+        ],
+        files=[(str(rel / "criticism.json"), "criticism.json")],
+    )
 
 
 def write_index(folder: str | os.PathLike, title: str, sections: Sequence[Section]) -> Path:

@@ -1,41 +1,65 @@
 """The pipeline stages, in the order of the science.
 
 records → backbones → SINDy model → analytical backbones → surrogate →
-updating → criticism → report. Each stage is one function that reads what
-earlier stages left on disk and writes its own artifacts; the ``pm-joint``
-subcommands and the demo call these and nothing else.
+updating → criticism → report. A stage reads what it needs from a
+:class:`~pm_joint.workspace.Workspace`, calls the library, writes its artifacts,
+puts what it made back into the workspace and returns it; the ``pm-joint``
+subcommands and the demo call these and nothing else. Figures come from
+:mod:`pm_joint.plotting`, the page from :mod:`pm_joint.html`.
 """
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import os
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-
-import matplotlib
-
-matplotlib.use("Agg")  # stages write PNG files; no display is needed or wanted
+from typing import Any
 
 import numpy as np
-from matplotlib.figure import Figure
+import xarray as xr
 
 from identification.analytical import harmonic, pll
+from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import Backbone, BackboneSet
-from identification.measurements.extraction import extract_backbones
 from identification.measurements.records import Campaign
-from identification.model import JointModel
-from identification.rig import RIG_PRESETS, Rig
-from identification.sindy import PAPER_LIBRARY, Identification, identify, plot_validation
+from identification.model import JointModel, parameter_bounds
+from identification.rig import RIG_PRESETS, rig_for_preset
+from identification.sindy import (
+    PAPER_LIBRARY,
+    Identification,
+    identify,
+    record_kinematics,
+    validate,
+)
+from pm_joint import html, plotting
+from pm_joint.inference import (
+    amplitudes_within_surrogate,
+    build_model,
+    continue_sampling,
+    sample,
+    save_posterior,
+)
+from pm_joint.report_folder import report
+from pm_joint.workspace import Workspace
+from surrogates.dataset import (
+    add_measured,
+    generate_dataset,
+    reachable_amplitude_range,
+    record_labels,
+)
+from surrogates.runtime import SurrogateRuntime
 
 __all__ = [
     "analytical_backbones",
     "campaign_backbones",
     "criticize_campaign",
     "identify_campaign",
-    "load_backbones",
-    "record_labels",
+    "label_records",
+    "posterior_report",
+    "run_report",
     "train_surrogate_stage",
     "update_backbones",
     "write_rig_campaign",
@@ -49,20 +73,21 @@ def write_rig_campaign(
     assemblies: int = 25,
     runs: int = 1,
     seed: int = 0,
-    levels: int = 10,
+    n_levels: int = 10,
     workers: int | None = 1,
     progress: bool = True,
 ) -> Campaign:
     """Write a virtual campaign of the rig preset ``preset`` in the TRC layout.
 
-    Records are simulated and written by ``workers`` processes (None: one per
-    CPU); the files do not depend on it. With more than one, call this from a
-    script's ``if __name__ == "__main__":`` block: worker processes start by
-    importing the main script.
+    ``n_levels`` excitation levels per record. Records are simulated and
+    written by ``workers`` processes (None: one per CPU); the files do not
+    depend on it. With more than one, call this from a script's
+    ``if __name__ == "__main__":`` block: worker processes start by importing
+    the main script.
     """
     if preset not in RIG_PRESETS:
         raise ValueError(f"unknown rig preset {preset!r}; available: {', '.join(RIG_PRESETS)}")
-    rig = Rig.preset(preset, levels=levels)
+    rig = rig_for_preset(preset, levels=n_levels)
     workers = min(workers or os.cpu_count() or 1, assemblies * runs)
     options = {"assemblies": assemblies, "runs": runs, "seed": seed, "progress": progress}
     if workers < 2:
@@ -74,79 +99,54 @@ def write_rig_campaign(
         return rig.write_campaign(out, executor=executor, **options)
 
 
-def campaign_backbones(
-    folder: str | os.PathLike,
-    out: str | os.PathLike | None = None,
-    *,
-    n_periods: int = 70,
-    progress: bool = True,
-) -> BackboneSet:
-    """Backbones of every record in a campaign folder; optionally saved as CSV (+ PNG)."""
-    backbones = extract_backbones(Campaign(folder), n_periods=n_periods, progress=progress)
-    if out is not None:
-        out = Path(out)
-        backbones.to_csv(out)
-        fig = Figure(figsize=(10, 4))
-        axes = fig.subplots(1, 2)
-        backbones.plot(axes)
-        fig.tight_layout()
-        fig.savefig(out.with_suffix(".png"), dpi=110)
+def campaign_backbones(workspace: Workspace) -> BackboneSet:
+    """Extract the backbones of every record; writes the workspace's CSV and a PNG beside it."""
+    backbones = workspace.extract_backbones()
+    figure = plotting.plot_measured_backbones(backbones)
+    plotting.save_png(figure, workspace.backbones_csv.with_suffix(".png"), dpi=110)
     return backbones
 
 
-def load_backbones(source: str | os.PathLike) -> BackboneSet:
-    """Backbones from a CSV written by :func:`campaign_backbones` or from a campaign folder."""
-    source = Path(source)
-    if source.is_dir():
-        return campaign_backbones(source, progress=False)
-    return BackboneSet.from_csv(source)
-
-
 def identify_campaign(
-    folder: str | os.PathLike,
+    workspace: Workspace,
     effects: Sequence[str] = PAPER_LIBRARY,
     *,
-    records: int = 3,
+    n_records: int = 3,
     out: str | os.PathLike | None = None,
-    **options,
+    **options: Any,
 ) -> Identification:
-    """SINDy identification from the first ``records`` records of a campaign.
+    """SINDy identification from the first ``n_records`` records; the workspace's model becomes it.
 
     With ``out`` (a JSON path) the model is written there, with the velocity
     and acceleration validation figures (the paper's Figs. 9–10) beside it.
     """
-    campaign = Campaign(folder)
-    chosen = [campaign[i] for i in range(min(records, len(campaign)))]
+    chosen = workspace.records[: min(n_records, len(workspace.records))]
     result = identify(chosen, list(effects), **options)
+    workspace.model = result.model
     if out is not None:
         out = Path(out)
         result.model.to_json(out)
-        from identification.sindy import record_kinematics, validate
-
         validation = validate(result.model, record_kinematics(chosen[0]))
         for channel in ("velocity", "acceleration"):
-            fig = Figure(figsize=(10, 7))
-            plot_validation(validation, fig.subplots(3, 1), channel=channel)
-            fig.tight_layout()
-            fig.savefig(out.with_name(f"{out.stem}_validation_{channel}.png"), dpi=100)
+            figure = plotting.plot_validation_figure(validation, channel)
+            path = out.with_name(f"{out.stem}_validation_{channel}.png")
+            plotting.save_png(figure, path, dpi=100)
     return result
 
 
 def analytical_backbones(
-    model: JointModel,
-    measured: BackboneSet,
-    out: str | os.PathLike | None = None,
-    *,
-    n_levels: int = 41,
+    workspace: Workspace, out: str | os.PathLike | None = None, *, n_points: int = 41
 ) -> dict[str, Backbone]:
     """The model's backbone by multi-harmonic balance and by the PLL simulator.
 
-    Both span the measured amplitudes; with ``out`` (a PNG path) they are drawn
-    over the measured curves (the paper's Fig. 12).
+    Both span the measured amplitudes (``n_points`` amplitudes, then as many
+    excitation levels); with ``out`` (a PNG path) they are drawn over the
+    measured curves (the paper's Fig. 12).
     """
+    model, measured = workspace.model, workspace.backbones
     low = min(b.amplitude_range_m[0] for b in measured)
     high = max(b.amplitude_range_m[1] for b in measured)
-    amplitudes = np.geomspace(low, high, n_levels)
+    amplitudes = np.geomspace(low, high, n_points)
     hb = harmonic.backbone(model, amplitudes, method="multi")
     ok = hb.converged
     curves = {
@@ -155,8 +155,9 @@ def analytical_backbones(
             label="harmonic balance", source=model.name,
         ),
     }  # fmt: skip
-    levels = np.abs(hb.base_acceleration[ok])
-    result = pll.simulate_pll(model, np.geomspace(levels.min(), levels.max(), n_levels))
+    excitation = np.abs(hb.base_acceleration[ok])
+    excitation_levels = np.geomspace(excitation.min(), excitation.max(), n_points)
+    result = pll.simulate_pll(model, excitation_levels)
     locked = result.locked
     if locked.sum() >= 2:
         curves["PLL"] = Backbone(
@@ -165,19 +166,7 @@ def analytical_backbones(
             label="PLL", source=model.name,
         )  # fmt: skip
     if out is not None:
-        fig = Figure(figsize=(10, 4))
-        ax_f, ax_d = fig.subplots(1, 2)
-        for b in measured:
-            ax_f.plot(b.amplitude_mm, b.frequency_hz, color="0.75", lw=0.8)
-            ax_d.plot(b.amplitude_mm, 100 * b.damping_ratio, color="0.75", lw=0.8)
-        for (label, b), style in zip(curves.items(), ("-", "o"), strict=False):
-            ax_f.plot(b.amplitude_mm, b.frequency_hz, style, label=label, ms=3)
-            ax_d.plot(b.amplitude_mm, 100 * b.damping_ratio, style, label=label, ms=3)
-        ax_f.set(xlabel="amplitude (mm)", ylabel="frequency (Hz)", title="measured (grey) vs model")
-        ax_d.set(xlabel="amplitude (mm)", ylabel="damping ratio (%)")
-        ax_f.legend()
-        fig.tight_layout()
-        fig.savefig(out, dpi=110)
+        plotting.save_png(plotting.plot_analytical_backbones(measured, curves), out, dpi=110)
     return curves
 
 
@@ -193,7 +182,8 @@ def criticize_campaign(
     """Criticize a model against a campaign; optionally add the best effect ``rounds`` times.
 
     ``measured`` are the campaign's backbones when already extracted (with the
-    harmonics they carry); else they are extracted from the records once.
+    harmonics they carry); else the campaign's workspace gives them (its
+    ``backbones.csv`` when fresh, else one extraction from the records).
     ``posterior`` (a DataTree) gives the predictive bands and the medians the
     model is compared at. Writes ``criticism.json`` and figures to ``out`` (for
     the last round, whose history holds every step) and returns the last
@@ -204,7 +194,7 @@ def criticize_campaign(
     if not isinstance(model, JointModel):
         model = JointModel.from_json(model)
     if measured is None:
-        measured = extract_backbones(Campaign(folder))
+        measured = Workspace(folder).backbones
     crit = criticize(model, measured, posterior=posterior)
     for _ in range(rounds):
         proposals = crit.missing()
@@ -215,255 +205,46 @@ def criticize_campaign(
     return crit
 
 
-def update_backbones(
-    measured: BackboneSet,
-    model: JointModel | None,
-    out: str | os.PathLike,
-    *,
-    forward: str = "surrogate",
-    surrogate: str | os.PathLike | None = None,
-    names: Sequence[str] | None = None,
-    sampler: str = "metropolis",
-    draws: int = 30_000,
-    tune: int = 2_000,
-    chains: int = 2,
-    seed: int = 0,
-    report_dir: str | os.PathLike | None = None,
-    trace: str | os.PathLike | None = None,
-    resume: bool = False,
-):
-    """Stochastic updating on measured backbones; saves the posterior (netCDF).
+def label_records(workspace: Workspace, names: Sequence[str] | None = None) -> np.ndarray:
+    """Parameters of each record alone (:func:`~surrogates.dataset.record_labels`).
 
-    With ``trace`` (a zarr folder) the draws are written there as they are
-    taken; with ``resume`` a run that stopped continues from that folder
-    (:func:`pm_joint.updating.continue_sampling`). Without it an existing
-    folder is refused rather than overwritten.
-    With ``report_dir`` the arviz report (summary, pairs, correlation, trace,
-    predictive backbones, PDFs at low/mid/high amplitude) is written there.
-    Returns the DataTree.
+    ``names`` default: :func:`identification.fitting.least_squares.default_free` of the
+    workspace's model; rows in the order of the records.
     """
-    from pm_joint.report import report
-    from pm_joint.updating import build_model, continue_sampling, sample, save_posterior
-
-    earlier_run = trace is not None and Path(trace).exists()
-    if earlier_run and not resume:
-        raise ValueError(
-            f"{trace} holds the draws of an earlier run: resume it, or remove it to start again"
-        )
-    levels = None
-    if forward == "surrogate":
-        levels = _levels_within_surrogate(measured, surrogate)
-    pm_model = build_model(
-        model, measured, forward=forward, surrogate=surrogate, names=names, levels=levels
-    )
-    if earlier_run:  # and resume
-        idata = continue_sampling(pm_model, trace, draws=draws, sampler=sampler)
-    else:
-        idata = sample(
-            pm_model, sampler=sampler, draws=draws, tune=tune, chains=chains, random_seed=seed,
-            trace=trace,
-        )  # fmt: skip
-    save_posterior(
-        idata, out, metadata={"forward": forward, "sampler": sampler, "surrogate": str(surrogate)}
-    )
-    if report_dir is not None:
-        from pm_joint.likelihood import BackboneDensity
-
-        density = BackboneDensity.fit(measured, levels)  # as build_model fitted it
-        report(idata, measured, density=density, out=report_dir, sampler=sampler)
-    return idata
-
-
-def _levels_within_surrogate(measured: BackboneSet, surrogate) -> np.ndarray:
-    """Likelihood levels over the amplitudes both the measurements and the surrogate cover.
-
-    The surrogate's range is that of its prediction at the centre of its
-    training box; a model that cannot be held at the largest measured
-    amplitudes (its excitation would have to fall) is compared where it can.
-    """
-    from pm_joint.likelihood import amplitude_levels
-    from surrogates.runtime import SurrogateRuntime
-
-    runtime = surrogate if isinstance(surrogate, SurrogateRuntime) else None
-    runtime = runtime or SurrogateRuntime.load(surrogate)
-    centre = np.mean(np.asarray(runtime.bounds, dtype=float), axis=1)
-    amplitude = runtime.amplitude_m(centre)
-    low, high = measured.common_range()
-    low, high = max(low, float(np.min(amplitude))), min(high, float(np.max(amplitude)))
-    levels = amplitude_levels(measured)
-    inside = levels[(levels >= low) & (levels <= high)]
-    if inside.size < 3:
-        raise ValueError(
-            f"the surrogate covers {1e3 * np.min(amplitude):.3g}–{1e3 * np.max(amplitude):.3g} mm "
-            f"at the centre of its box: fewer than 3 likelihood levels of the measured range"
-        )
-    return np.linspace(inside[0], inside[-1], levels.size)
-
-
-def posterior_sections(report_folder: str | os.PathLike, page_folder: str | os.PathLike):
-    """Report sections of an arviz report folder (written by :func:`pm_joint.report.report`)."""
-    import json
-
-    from pm_joint.html import Section
-
-    folder = Path(report_folder)
-    content = json.loads((folder / "report.json").read_text(encoding="utf-8"))
-    rel = Path(os.path.relpath(folder, page_folder))
-    files = [f for f in content["files"] if f.endswith(".png")]
-    summary_rows = [
-        {k: v for k, v in row.items() if k in ("variable", "index", "mean", "sd", "eti94_lb",
-                                                "eti94_ub", "ess_bulk", "r_hat")}
-        for row in content["summary"]
-    ]  # fmt: skip
-    pdf_rows = [
-        {
-            "level": level,
-            "amplitude_mm": entry.get("amplitude_mm"),
-            "measured_family": entry["measured_fit"]["family"],
-            "sampled_family": entry["sampled_fit"]["family"],
-            "ks_statistic": entry["distances"]["ks_statistic"],
-            "ks_pvalue": entry["distances"]["ks_pvalue"],
-            "wasserstein_hz": entry["distances"]["wasserstein"],
-        }
-        for level, entry in content["level_pdfs"].items()
-    ]
-    sampler = content.get("sampler", {})
-    return [
-        Section(
-            "Stochastic updating",
-            f"Sampler: {sampler.get('sampler')}, {sampler.get('draws')} draws × "
-            f"{sampler.get('chains')} chains; mean acceptance {sampler.get('acceptance_rate')}.",
-            tables=[("posterior summary", summary_rows)],
-            figures=[(str(rel / f), f.removesuffix(".png").replace("_", " ")) for f in files],
-            files=[(str(rel / "report.json"), "report.json")],
-        ),
-        Section(
-            "PDFs at low, mid and high amplitude",
-            "Measured against sampled frequencies, each with its best-fitting distribution "
-            "family (AIC) and the distances between them (the paper's Fig. 22).",
-            tables=[("per amplitude level", pdf_rows)],
-        ),
-    ]
-
-
-def criticism_section(folder: str | os.PathLike, page_folder: str | os.PathLike):
-    """Report section of a criticism folder (written by :meth:`Criticism.write`)."""
-    import json
-
-    from pm_joint.html import Section
-
-    folder = Path(folder)
-    content = json.loads((folder / "criticism.json").read_text(encoding="utf-8"))
-    rel = Path(os.path.relpath(folder, page_folder))
-    verdict = (
-        "Something significant is missing." if content["significant"]
-        else "Nothing significant missing."
-    )  # fmt: skip
-    fails = "; ".join(r.get("text", str(r)) for r in content.get("fails_at", [])) or "nowhere"
-    return Section(
-        "Model criticism",
-        f"{verdict} Where the model fails: {fails}.",
-        tables=[
-            ("ranked missing effects", content["ranking"]),
-            (
-                "error history",
-                [
-                    {k: v for k, v in step.items() if not isinstance(v, (list, dict))}
-                    for step in content.get("history", [])
-                ],
-            ),
-        ],
-        figures=[
-            (str(rel / "comparison.png"), "measured vs predicted, residual bands"),
-            (str(rel / "signatures.png"), "residual beside the top candidates' signatures"),
-            (str(rel / "history.png"), "the error along the loop"),
-        ],
-        files=[(str(rel / "criticism.json"), "criticism.json")],
-    )
-
-
-def run_report(
-    measured: BackboneSet,
-    out: str | os.PathLike,
-    *,
-    posterior: str | os.PathLike | None = None,
-    criticism: str | os.PathLike | None = None,
-) -> Path:
-    """HTML report of a run: measured backbones, the posterior and the criticism."""
-    from pm_joint.html import Section, write_index
-    from pm_joint.report import report
-    from pm_joint.updating import load_posterior
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    fig = Figure(figsize=(10, 4))
-    measured.plot(fig.subplots(1, 2))
-    fig.tight_layout()
-    fig.savefig(out / "backbones.png", dpi=110)
-    sections = [
-        Section(
-            "Measured backbones",
-            f"{len(measured)} backbones.",
-            figures=[("backbones.png", "frequency and damping against amplitude")],
-        )
-    ]
-    if posterior is not None:
-        report(load_posterior(posterior), measured, out=out / "posterior")
-        sections += posterior_sections(out / "posterior", out)
-    if criticism is not None:
-        sections.append(criticism_section(criticism, out))
-    return write_index(out, "pm-joint report", sections)
-
-
-def record_labels(records: Sequence, model: JointModel, names: Sequence[str]) -> np.ndarray:
-    """Parameters of each record alone: least squares on the model's own terms.
-
-    The paper labels its measured backbones by identifying each record; with
-    the model's support fixed (no thresholding) that is a well-posed fit of
-    the same parameters, record by record. Shape parameters keep the model's
-    values.
-    """
-    shapes = {t.effect: dict(t.shape) for t in model.terms if t.shape}
-    rows = []
-    for record in records:
-        fitted = identify(record, model.effects, threshold=None, shapes=shapes).model
-        values = {**model.parameters, **fitted.parameters}
-        rows.append([values[n] for n in names])
-    return np.array(rows)
+    model = workspace.model
+    return record_labels(workspace.records, model, names or default_free(model))
 
 
 def train_surrogate_stage(
-    measured: BackboneSet,
-    model: JointModel,
+    workspace: Workspace,
     out: str | os.PathLike,
     *,
     labels: np.ndarray | None = None,
     n_curves: int = 500,
-    spread: float = 0.2,
+    relative_spread: float = 0.2,
     max_epochs: int | None = None,
     seed: int = 0,
     progress: bool = True,
-):
+) -> SurrogateRuntime:
     """Dataset (analytical + measured curves), training and ONNX export, as the paper.
 
     ``labels`` are the measured curves' parameters in the order of
-    :func:`identification.fitting.least_squares.default_free` (e.g. :func:`record_labels`);
+    :func:`identification.fitting.least_squares.default_free` (e.g. :func:`label_records`);
     without them only analytical curves are used. The training box covers
-    ± ``spread`` around the model and every label. The analytical curves
-    (harmonic balance, inverted onto fixed excitation levels) make up the rest
-    of ``n_curves``. Writes ``out/surrogate.onnx``, its sidecar,
-    ``out/dataset.npz`` and a prediction figure; returns the
-    :class:`~surrogates.runtime.SurrogateRuntime`.
+    ± ``relative_spread`` around the model and every label. The analytical
+    curves (harmonic balance, inverted onto fixed excitation levels) make up
+    the rest of ``n_curves``. Writes ``out/surrogate.onnx``, its sidecar,
+    ``out/dataset.npz`` and a prediction figure; the workspace's surrogate
+    becomes the exported runtime, which is returned.
     """
-    from identification.fitting.least_squares import default_free
-    from surrogates.dataset import add_measured, default_bounds, generate_dataset
+    # torch only here: `pm-joint update` and the reports never load it.
     from surrogates.export import export_surrogate
-    from surrogates.runtime import SurrogateRuntime
     from surrogates.train import TrainingConfig, train_surrogate
 
     out = Path(out)
+    model, measured = workspace.model, workspace.backbones
     names = default_free(model)
-    box = default_bounds(model, names, spread)
+    box = parameter_bounds(model, names, relative_spread)
     n_measured = 0
     if labels is not None:
         labels = np.asarray(labels, dtype=float)
@@ -471,7 +252,7 @@ def train_surrogate_stage(
         box[:, 0] = np.minimum(box[:, 0], labels.min(axis=0) - margin)
         box[:, 1] = np.maximum(box[:, 1], labels.max(axis=0) + margin)
         n_measured = len(measured)
-    low, high = _reachable_range(
+    low, high = reachable_amplitude_range(
         model,
         min(b.amplitude_range_m[0] for b in measured),
         max(b.amplitude_range_m[1] for b in measured),
@@ -492,41 +273,99 @@ def train_surrogate_stage(
     surrogate = train_surrogate(dataset.X, dataset.Y, dataset.spec, config)
     export_surrogate(surrogate, out)
     runtime = SurrogateRuntime.load(out)
-    _plot_surrogate_check(runtime, dataset, out / "surrogate_predictions.png")
+    figure = plotting.plot_surrogate_check(runtime, dataset)
+    plotting.save_png(figure, out / "surrogate_predictions.png", dpi=110)
+    workspace.surrogate = runtime
     return runtime
 
 
-def _reachable_range(model: JointModel, low: float, high: float) -> tuple[float, float]:
-    """The part of ``[low, high]`` a stepped excitation can hold the model at.
+def update_backbones(
+    workspace: Workspace,
+    out: str | os.PathLike,
+    *,
+    forward: str = "surrogate",
+    names: Sequence[str] | None = None,
+    amplitudes_m: np.ndarray | None = None,
+    channels: Sequence[str] = ("frequency_hz",),
+    family: str = "copula",
+    sampler: str = "metropolis",
+    draws: int = 30_000,
+    tune: int = 2_000,
+    chains: int = 2,
+    seed: int = 0,
+    trace: str | os.PathLike | None = None,
+    resume: bool = False,
+) -> xr.DataTree:
+    """Stochastic updating on the workspace's backbones; saves the posterior (netCDF).
 
-    Excitation levels map one-to-one onto amplitudes only while the base
-    acceleration the backbone needs increases with amplitude; past its first
-    maximum a PLL test jumps, so the range ends there.
+    The likelihood density is the workspace's (fitted once) at ``amplitudes_m``
+    (default: for a surrogate, the levels both it and the measurements cover,
+    :func:`~pm_joint.inference.amplitudes_within_surrogate`; else the default
+    grid) and is saved with the posterior, so a later report draws exactly what
+    was sampled. With ``trace`` (a zarr folder) the draws are written there as
+    they are taken; with ``resume`` a run that stopped continues from that
+    folder (:func:`~pm_joint.inference.continue_sampling`). Without it an
+    existing folder is refused rather than overwritten. The workspace's
+    posterior becomes the returned DataTree.
     """
-    grid = np.geomspace(low, high, 200)
-    hb = harmonic.backbone(model, grid, method="multi")
-    level = np.where(hb.converged, hb.base_acceleration, np.nan)
-    falling = np.flatnonzero(~(np.diff(level) > 0))
-    end = grid[falling[0]] if falling.size else high
-    if end <= low * 1.5:
+    earlier_run = trace is not None and Path(trace).exists()
+    if earlier_run and not resume:
         raise ValueError(
-            f"model {model.name or model.equation()!r}: its backbone needs a base acceleration "
-            f"that does not increase over the measured {1e3 * low:.3g}–{1e3 * high:.3g} mm"
+            f"{trace} holds the draws of an earlier run: resume it, or remove it to start again"
         )
-    return low, float(end)
+    measured = workspace.backbones
+    surrogate = workspace.surrogate if forward == "surrogate" else None
+    if amplitudes_m is None and surrogate is not None:
+        amplitudes_m = amplitudes_within_surrogate(measured, surrogate)
+    density = workspace.density(amplitudes_m, channels=channels, family=family)
+    pm_model = build_model(
+        workspace.model, measured, forward=forward, surrogate=surrogate, names=names,
+        density=density,
+    )  # fmt: skip
+    if earlier_run:  # and resume
+        idata = continue_sampling(pm_model, trace, draws=draws, sampler=sampler)
+    else:
+        idata = sample(
+            pm_model, sampler=sampler, draws=draws, tune=tune, chains=chains, random_seed=seed,
+            trace=trace,
+        )  # fmt: skip
+    metadata = {"forward": forward, "sampler": sampler, "surrogate": str(surrogate)}
+    save_posterior(idata, out, metadata=metadata, density=density)
+    workspace.posterior = idata
+    return idata
 
 
-def _plot_surrogate_check(runtime, dataset, path: Path, n: int = 6) -> None:
-    """A few curves of the dataset against the surrogate's prediction (the paper's Fig. 17)."""
-    rows = np.linspace(0, len(dataset) - 1, n).astype(int)
-    predicted = runtime.predict(dataset.X[rows])
-    a, f = dataset.spec.channel_index("amplitude_m"), dataset.spec.channel_index("frequency_hz")
-    fig = Figure(figsize=(6, 4.5))
-    ax = fig.subplots()
-    for k, row in enumerate(rows):
-        line = ax.plot(1e3 * dataset.Y[row, :, a], dataset.Y[row, :, f], "o", ms=3)[0]
-        ax.plot(1e3 * predicted[k, :, a], predicted[k, :, f], "-", color=line.get_color())
-    ax.set(xlabel="amplitude (mm)", ylabel="frequency (Hz)",
-           title="dataset curves (dots) vs surrogate (lines)")  # fmt: skip
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
+def posterior_report(workspace: Workspace, out: str | os.PathLike) -> dict[str, Any]:
+    """The report folder of the workspace's posterior (:func:`pm_joint.report_folder.report`).
+
+    The likelihood density is the one stored with the posterior; a posterior
+    without one gets a warning and a density refitted at the default levels.
+    """
+    return report(workspace.posterior, workspace.backbones, out=out)
+
+
+def run_report(
+    workspace: Workspace,
+    out: str | os.PathLike,
+    *,
+    criticism: str | os.PathLike | None = None,
+) -> Path:
+    """HTML report of a run: measured backbones, the posterior (if any) and a criticism folder."""
+    out = Path(out)
+    measured = workspace.backbones
+    plotting.save_png(plotting.plot_measured_backbones(measured), out / "backbones.png", dpi=110)
+    sections = [
+        html.Section(
+            "Measured backbones",
+            f"{len(measured)} backbones.",
+            figures=[("backbones.png", "frequency and damping against amplitude")],
+        )
+    ]
+    if workspace.has_posterior:
+        content = posterior_report(workspace, out / "posterior")
+        sections += html.posterior_sections(content, out / "posterior", out)
+    if criticism is not None:
+        # A folder `pm-joint criticize` wrote in another run: its record is the file.
+        record = json.loads((Path(criticism) / "criticism.json").read_text(encoding="utf-8"))
+        sections.append(html.criticism_section(record, criticism, out))
+    return html.write_index(out, "pm-joint report", sections)

@@ -24,7 +24,6 @@ __all__ = [
     "backbone_metrics",
     "export_surrogate",
     "generate_dataset",
-    "table5_study",
     "train_surrogate",
 ]
 
@@ -38,7 +37,6 @@ _LAZY = {
     "train_surrogate": "surrogates.train",
     "export_surrogate": "surrogates.export",
     "backbone_metrics": "surrogates.evaluate",
-    "table5_study": "surrogates.evaluate",
 }
 
 

@@ -59,15 +59,18 @@ from identification.artifacts import atomic_write_bytes, sha256_bytes, versions
 from identification.fitting.least_squares import default_free
 from identification.fitting.prediction import resolve_method
 from identification.measurements.backbone import BackboneSet
-from identification.model import JointModel
+from identification.measurements.records import Record
+from identification.model import JointModel, parameter_bounds
+from identification.sindy import identify
 from surrogates.runtime import SurrogateSpec
 
 __all__ = [
     "BackboneDataset",
     "add_measured",
-    "default_bounds",
     "generate_dataset",
     "nominal_levels",
+    "reachable_amplitude_range",
+    "record_labels",
     "sample_parameters",
 ]
 
@@ -234,37 +237,6 @@ def _canonical_bytes(payload: Mapping[str, np.ndarray]) -> bytes:
 # Parameters and levels
 
 
-def default_bounds(
-    model: JointModel, names: Sequence[str], spread: float | Mapping[str, float] = 0.2
-) -> np.ndarray:
-    """``(n_params, 2)`` box ``value ± spread·|value|`` around the model's parameters.
-
-    ``spread`` is one relative spread or one per name. Shape parameters (names
-    with a dot, e.g. ``microslip.F_s``) must stay positive, so their spread must
-    be below 1; a parameter that is zero has no relative box (pass bounds).
-    """
-    values = model.parameters
-    rows = []
-    for name in names:
-        if name not in values:
-            raise ValueError(f"unknown parameter {name!r}; the model has {model.parameter_names}")
-        s = spread.get(name) if isinstance(spread, Mapping) else spread
-        if s is None:
-            raise ValueError(f"spread: no relative spread given for parameter {name!r}")
-        if not (math.isfinite(s) and s > 0):
-            raise ValueError(f"spread of parameter {name!r} must be finite and > 0, got {s}")
-        value = values[name]
-        if value == 0:
-            raise ValueError(
-                f"parameter {name!r} is 0 in the model: a relative spread gives an empty box; "
-                "pass its bounds"
-            )
-        if "." in name and s >= 1:
-            raise ValueError(f"shape parameter {name!r} must stay > 0: spread {s} must be < 1")
-        rows.append(sorted((value - s * abs(value), value + s * abs(value))))
-    return np.array(rows, dtype=float)
-
-
 def sample_parameters(
     bounds: ArrayLike, n: int, *, sampler: Literal["lhs", "sobol"] = "lhs", seed: int = 0
 ) -> np.ndarray:
@@ -314,6 +286,34 @@ def nominal_levels(
             f"increasing over {1e3 * low:g}–{1e3 * high:g} mm; pass levels explicitly"
         )
     return levels
+
+
+def reachable_amplitude_range(
+    model: JointModel, low_m: float, high_m: float
+) -> tuple[float, float]:
+    """The part of the amplitudes ``[low_m, high_m]`` a stepped excitation can hold the model at.
+
+    Excitation levels map one-to-one onto amplitudes only while the base
+    acceleration the backbone needs increases with amplitude; past its first
+    maximum a PLL test jumps, so the range ends there (multi-harmonic balance
+    on 200 geometric amplitudes).
+
+    Raises
+    ------
+    ValueError
+        When the range ends before ``1.5 × low_m``.
+    """
+    grid = np.geomspace(low_m, high_m, 200)
+    hb = backbone(model, grid, method="multi")
+    level = np.where(hb.converged, hb.base_acceleration, np.nan)
+    falling = np.flatnonzero(~(np.diff(level) > 0))
+    end = grid[falling[0]] if falling.size else high_m
+    if end <= low_m * 1.5:
+        raise ValueError(
+            f"model {model.name or model.equation()!r}: its backbone needs a base acceleration "
+            f"that does not increase over the measured {1e3 * low_m:.3g}–{1e3 * high_m:.3g} mm"
+        )
+    return low_m, float(end)
 
 
 # ---------------------------------------------------------------------------
@@ -462,7 +462,8 @@ def generate_dataset(
         Parameter sets drawn (failed ones are dropped, so the dataset may hold fewer).
     spread, bounds
         The box: ``bounds`` (``(n_params, 2)`` or ``{name: (low, high)}``, the
-        latter overriding :func:`default_bounds` for those names), else ± ``spread``.
+        latter overriding :func:`~identification.model.parameter_bounds` for those names),
+        else ± ``spread``.
     levels, n_levels, amplitude_range_m
         Excitation levels (m/s², increasing); default :func:`nominal_levels` of
         ``n_levels`` over ``amplitude_range_m`` (m), which also sets the
@@ -591,13 +592,13 @@ def _box(
     bounds: ArrayLike | Mapping[str, tuple[float, float]] | None,
 ) -> np.ndarray:
     if bounds is None:
-        return default_bounds(model, names, spread)
+        return parameter_bounds(model, names, spread)
     if isinstance(bounds, Mapping):
         unknown = set(bounds) - set(names)
         if unknown:
             raise ValueError(f"bounds given for {sorted(unknown)}, which are not in {names}")
         free = [n for n in names if n not in bounds]
-        defaults = dict(zip(free, default_bounds(model, free, spread), strict=True))
+        defaults = dict(zip(free, parameter_bounds(model, free, spread), strict=True))
         return np.array([bounds.get(n, defaults.get(n)) for n in names], dtype=float)
     box = np.asarray(bounds, dtype=float)
     if box.shape != (len(names), 2):
@@ -633,6 +634,24 @@ def _run_harmonic(
 
 # ---------------------------------------------------------------------------
 # Measured curves
+
+
+def record_labels(records: Sequence[Record], model: JointModel, names: Sequence[str]) -> np.ndarray:
+    """Parameters of each record alone: least squares on the model's own terms.
+
+    The paper labels its measured backbones by identifying each record; with
+    the model's support fixed (no thresholding) that is a well-posed fit of
+    the same parameters, record by record. Shape parameters keep the model's
+    values. Returns ``(n_records, len(names))``, rows in the order of ``records``
+    (the labels :func:`add_measured` takes).
+    """
+    shapes = {t.effect: dict(t.shape) for t in model.terms if t.shape}
+    rows = []
+    for record in records:
+        fitted = identify(record, model.effects, threshold=None, shapes=shapes).model
+        values = {**model.parameters, **fitted.parameters}
+        rows.append([values[n] for n in names])
+    return np.array(rows)
 
 
 def add_measured(

@@ -1,4 +1,4 @@
-"""Accuracy of a backbone surrogate on held-out curves, and the paper's Table 5 study.
+"""Accuracy of a backbone surrogate on held-out curves (the paper's Table 5 metrics).
 
 The metrics are plain numpy so they apply to any predictor (the torch
 :class:`~surrogates.train.Surrogate` or the onnxruntime
@@ -7,18 +7,13 @@ The metrics are plain numpy so they apply to any predictor (the torch
 
 from __future__ import annotations
 
-import time
-from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from surrogates.runtime import SurrogateSpec
 
-if TYPE_CHECKING:
-    from surrogates.train import TrainingConfig
-
-__all__ = ["PAPER_TABLE5", "backbone_metrics", "table5_study"]
+__all__ = ["PAPER_TABLE5", "backbone_metrics"]
 
 #: Paper Table 5: training-set size → (MSE, MAE, MAPE) on its test set.
 PAPER_TABLE5 = {
@@ -89,71 +84,3 @@ def _pearson(a: np.ndarray, b: np.ndarray) -> float:
     if np.ptp(a) == 0 or np.ptp(b) == 0:
         return float("nan")  # undefined for a constant series
     return float(np.corrcoef(a, b)[0, 1])
-
-
-def table5_study(
-    parameters: np.ndarray,
-    backbones: np.ndarray,
-    spec: SurrogateSpec,
-    *,
-    sizes: Sequence[int] = (200, 300, 400, 500),
-    test: tuple[np.ndarray, np.ndarray] | None = None,
-    n_test: int = 100,
-    config: TrainingConfig | None = None,
-    seed: int = 0,
-) -> list[dict[str, Any]]:
-    """The paper's Table 5: accuracy against the number of training curves.
-
-    Each size trains a fresh surrogate on the first ``size`` curves of one seeded
-    permutation (so the sets are nested) and evaluates it on the same test set:
-    ``test`` if given, else ``n_test`` curves held out from the data. A size counts
-    every curve handed to training, its validation split included, as the
-    paper's "Datasize" does.
-
-    Returns
-    -------
-    list of dict
-        One row per size: ``n_train``, the :func:`backbone_metrics` headline
-        figures, frequency MAPE, training seconds, and the paper's MSE / MAE /
-        MAPE for that size (None where the paper has no row).
-    """
-    # Imported here so that the metrics above stay usable without torch.
-    from surrogates.train import TrainingConfig, train_surrogate
-
-    config = config or TrainingConfig()
-    parameters = spec.check_parameters(parameters)
-    backbones = spec.check_backbones(backbones)
-    order = np.random.default_rng(seed).permutation(len(parameters))
-    if test is None:
-        test_index, order = order[:n_test], order[n_test:]
-        test = (parameters[test_index], backbones[test_index])
-    x_test, y_test = (
-        spec.check_parameters(test[0], "test parameters"),
-        spec.check_backbones(test[1]),
-    )
-    if max(sizes) > order.size:
-        raise ValueError(f"size {max(sizes)} asked for, only {order.size} training curves exist")
-    rows = []
-    for size in sizes:
-        subset = order[:size]
-        start = time.perf_counter()
-        surrogate = train_surrogate(parameters[subset], backbones[subset], spec, config)
-        seconds = time.perf_counter() - start
-        metrics = backbone_metrics(surrogate.predict(x_test), y_test, spec)
-        paper = PAPER_TABLE5.get(size, (None, None, None))
-        rows.append(
-            {
-                "n_train": size,
-                "mse_amplitude_mm2": metrics.get("mse_amplitude_mm2"),
-                "mae_amplitude_mm": metrics.get("mae_amplitude_mm"),
-                "mape_amplitude_pct": metrics["channels"].get("amplitude_m", {}).get("mape_pct"),
-                "mape_frequency_pct": metrics["channels"].get("frequency_hz", {}).get("mape_pct"),
-                "pearson": metrics["pearson"],
-                "pearson_min_channel": metrics["pearson_min_channel"],
-                "train_s": seconds,
-                "paper_mse": paper[0],
-                "paper_mae": paper[1],
-                "paper_mape": paper[2],
-            }
-        )
-    return rows

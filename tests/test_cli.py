@@ -18,7 +18,7 @@ from scipy.integrate import cumulative_trapezoid
 from identification.model import JointModel
 from pm_joint.cli import main
 from pm_joint.html import missing_links
-from pm_joint.updating import load_posterior
+from pm_joint.inference import load_posterior
 
 FS = 10_000.0
 ZETA = 0.005

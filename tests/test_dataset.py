@@ -19,12 +19,11 @@ import torch
 
 from identification.analytical.harmonic import backbone
 from identification.measurements.backbone import Backbone, BackboneSet
-from identification.model import JointModel
+from identification.model import JointModel, parameter_bounds
 from identification.rig import RIG_PRESETS
 from surrogates.dataset import (
     BackboneDataset,
     add_measured,
-    default_bounds,
     generate_dataset,
     nominal_levels,
     sample_parameters,
@@ -54,24 +53,9 @@ def small(model=TRC, names=None, n=6, **options):
 # -- parameters and levels ----------------------------------------------------------
 
 
-def test_default_bounds_are_sign_aware():
-    model = JointModel.preset("pandey2025")  # has negative coefficients
-    names = ["linear_stiffness", "cubic_stiffness", "van_der_pol"]
-    box = default_bounds(model, names, {"linear_stiffness": 0.1, "cubic_stiffness": 0.5,
-                                        "van_der_pol": 0.2})  # fmt: skip
-    values = np.array([model.parameters[n] for n in names])
-    np.testing.assert_allclose(box[0], [0.9 * values[0], 1.1 * values[0]])
-    np.testing.assert_allclose(box[1], [1.5 * values[1], 0.5 * values[1]])  # negative
-    assert np.all(box[:, 0] < values) and np.all(values < box[:, 1])
-    with pytest.raises(ValueError, match=r"shape parameter .microslip\.F_s. must stay > 0"):
-        default_bounds(TRC, ["microslip.F_s"], 1.5)
-    with pytest.raises(ValueError, match="unknown parameter 'k9'"):
-        default_bounds(TRC, ["k9"])
-
-
 @pytest.mark.parametrize("sampler", ["lhs", "sobol"])
 def test_qmc_samples_lie_within_bounds_and_are_seeded(sampler):
-    box = default_bounds(JointModel.preset("pandey2025"), ["cubic_stiffness", "van_der_pol"], 0.3)
+    box = parameter_bounds(JointModel.preset("pandey2025"), ["cubic_stiffness", "van_der_pol"], 0.3)
     x = sample_parameters(box, 64, sampler=sampler, seed=3)
     assert x.shape == (64, 2)
     assert np.all((x >= box[:, 0]) & (x <= box[:, 1]))

@@ -7,6 +7,7 @@ energy-based microslip damping, and per-model loops for the batched path.
 
 import numpy as np
 import pytest
+from oscillators import duffing
 from scipy import integrate, optimize
 
 from identification.analytical.harmonic import backbone
@@ -15,17 +16,13 @@ from identification.model import JointModel
 W0 = 2 * np.pi * 100.0  # rad/s
 
 
-def duffing(k3: float, **extra) -> JointModel:
-    return JointModel({"linear_stiffness": W0**2, "cubic_stiffness": k3, **extra})
-
-
 # ----------------------------------------------------------------- Duffing
 
 
 def test_single_harmonic_duffing_is_the_classical_backbone():
     a = np.geomspace(1e-6, 3e-3, 25)
     k3 = 2e11
-    result = backbone(duffing(k3), a)
+    result = backbone(duffing(k3, damping_ratio=None), a)
     expected = np.sqrt(W0**2 + 0.75 * k3 * a**2) / (2 * np.pi)
     np.testing.assert_allclose(result.frequency_hz, expected, rtol=1e-10)
     assert result.converged.all()
@@ -62,8 +59,8 @@ def test_multi_harmonic_matches_time_integration_of_the_free_duffing_orbit():
     period, a1 = free_duffing_orbit(k3, x0=a_target)
     assert 0.29 < 0.75 * k3 * a1**2 / W0**2 < 0.31
     reference_hz = 1.0 / period
-    multi = backbone(duffing(k3), [a1], method="multi", harmonics=5)
-    single = backbone(duffing(k3), [a1])
+    multi = backbone(duffing(k3, damping_ratio=None), [a1], method="multi", harmonics=5)
+    single = backbone(duffing(k3, damping_ratio=None), [a1])
     error_multi = abs(multi.frequency_hz[0] / reference_hz - 1)
     error_single = abs(single.frequency_hz[0] / reference_hz - 1)
     print(f"\nfree Duffing orbit: {reference_hz:.8f} Hz; H=5 error {error_multi:.2e}, "
@@ -265,7 +262,7 @@ def test_base_acceleration_is_the_power_balance_of_the_damping():
 
 
 def test_no_positive_stiffness_gives_nan_not_an_exception():
-    softening = duffing(-1e11)  # ω² = ω0² − ¾·1e11·a² < 0 above ≈ 2.3 mm
+    softening = duffing(-1e11, damping_ratio=None)  # ω² = ω0² − ¾·1e11·a² < 0 above ≈ 2.3 mm
     a = np.array([1e-4, 1e-3, 5e-3])
     for method in ("single", "multi"):
         r = backbone(softening, a, method=method)
@@ -277,7 +274,7 @@ def test_no_positive_stiffness_gives_nan_not_an_exception():
 
 
 def test_non_converged_newton_is_flagged_and_nan():
-    r = backbone(duffing(2e11), [1e-3], method="multi", max_iter=0)
+    r = backbone(duffing(2e11, damping_ratio=None), [1e-3], method="multi", max_iter=0)
     assert not r.converged[0]
     assert np.isnan(r.frequency_hz[0]) and np.isnan(r.harmonics_cos_m[0]).all()
 
@@ -308,7 +305,7 @@ def test_non_converged_newton_is_flagged_and_nan():
 def test_bad_input_names_the_item(kwargs, message):
     kwargs = {"amplitudes_m": [1e-3], **kwargs}
     with pytest.raises(ValueError, match=message):
-        backbone(duffing(1e11), **kwargs)
+        backbone(duffing(1e11, damping_ratio=None), **kwargs)
 
 
 def test_bad_shape_parameter_is_named():

@@ -180,7 +180,7 @@ def test_no_file_is_unpickled_by_the_package():
 def test_posterior_file_carries_a_hash_and_versions_checked_on_load(tmp_path):
     from arviz_base import from_dict
 
-    from pm_joint.updating import load_posterior, save_posterior
+    from pm_joint.inference import load_posterior, save_posterior
 
     rng = np.random.default_rng(0)
     idata = from_dict({"posterior": {"k": rng.normal(size=(2, 50)), "c": rng.normal(size=(2, 50))}})

@@ -27,6 +27,7 @@ from identification.rig import (
     RIG_PRESETS,
     Rig,
     read_ground_truth,
+    rig_for_preset,
 )
 from identification.rig.conditions import Controller, Drift, Sensors, Shaker
 from identification.rig.joints import (
@@ -432,7 +433,7 @@ def test_lab_presets_are_reachable_and_say_what_is_hidden():
     for name in (*LAB_NULL_SCENARIOS, *LAB_HIDDEN_SCENARIOS, *LAB_OUT_OF_CATALOGUE_SCENARIOS):
         preset = RIG_PRESETS[name]
         assert preset.lab is not None and not name.startswith("hidden-")
-        rig = Rig.preset(name, levels=4)
+        rig = rig_for_preset(name, levels=4)
         assert isinstance(rig, LabRig) and rig.name == name
         if name in LAB_NULL_SCENARIOS:
             assert preset.model.effects == preset.base_model.effects
@@ -447,13 +448,15 @@ def test_lab_presets_are_reachable_and_say_what_is_hidden():
     from identification.effects import CATALOGUE
 
     assert hidden == set(CATALOGUE) - {"linear_stiffness", "viscous_damping"}
-    assert isinstance(Rig.preset("hidden-cubic"), Rig) and not isinstance(
-        Rig.preset("hidden-cubic"), LabRig
+    assert isinstance(rig_for_preset("hidden-cubic"), Rig) and not isinstance(
+        rig_for_preset("hidden-cubic"), LabRig
     )
+    with pytest.raises(ValueError, match="lab scenario"):
+        Rig.preset("lab-iwan")
 
 
 def test_lab_campaign_truth_and_workers_equal_serial(tmp_path):
-    rig = Rig.preset("lab-iwan", levels=2, hold_s=0.8)
+    rig = rig_for_preset("lab-iwan", levels=2, hold_s=0.8)
     assert rig.levels_v[:2] == rig.levels_v[:-3:-1]  # up then down
     rig.write_campaign(tmp_path / "serial", assemblies=2, seed=5)
     with ThreadPoolExecutor(2) as executor:
@@ -515,7 +518,7 @@ def test_bad_lab_settings_are_refused_with_their_name():
 def test_every_lab_preset_locks_over_its_range(name):
     """A full-size record of every lab scenario locks at every level (phase within the
     scenario's offset plus a few degrees) and spans its amplitude range."""
-    rig = Rig.preset(name, levels=10)
+    rig = rig_for_preset(name, levels=10)
     record, _ = rig.campaign(assemblies=1, seed=2)[0]
     curve = extract_backbone(record)
     offset = rig.controller.phase_offset_deg

@@ -1,3 +1,4 @@
+import json
 import warnings
 
 import numpy as np
@@ -5,12 +6,11 @@ import pymc as pm
 import pytensor
 import pytensor.tensor as pt
 import pytest
+from oscillators import POPULATION_AMPLITUDES_M
 from scipy import stats
 
-from identification.analytical import harmonic
 from identification.measurements.backbone import Backbone, BackboneSet
-from identification.model import JointModel
-from pm_joint.likelihood import (
+from pm_joint.distributions import (
     BackboneAmplitude,
     BackboneDensity,
     NanCounter,
@@ -20,34 +20,12 @@ from pm_joint.likelihood import (
 )
 
 W0 = 2 * np.pi * 100.0
-AMPS = np.linspace(5e-5, 1.5e-3, 30)
-
-
-def duffing(k_scale=1.0, k3=1e10, zeta=0.004):
-    return JointModel(
-        {
-            "linear_stiffness": W0**2 * k_scale,
-            "cubic_stiffness": k3,
-            "viscous_damping": 2 * zeta * W0,
-        }
-    )
-
-
-@pytest.fixture(scope="module")
-def measured():
-    rng = np.random.default_rng(0)
-    curves = []
-    for i in range(25):
-        model = duffing(1 + 0.01 * rng.normal(), 1e10 * (1 + 0.2 * rng.normal()))
-        hb = harmonic.backbone(model, AMPS)
-        curves.append(Backbone(hb.amplitude_m, hb.frequency_hz, hb.damping_ratio, label=f"c{i}"))
-    return BackboneSet(curves)
 
 
 @pytest.mark.parametrize("family", ["copula", "mvn"])
-def test_pytensor_graph_equals_numpy_density(measured, family):
+def test_pytensor_graph_equals_numpy_density(duffing_assemblies, family):
     density = BackboneDensity.fit(
-        measured, channels=("frequency_hz", "damping_ratio"), family=family
+        duffing_assemblies, channels=("frequency_hz", "damping_ratio"), family=family
     )
     v = pt.vector("v")
     f = pytensor.function([v], logp_graph(density, v))
@@ -55,8 +33,23 @@ def test_pytensor_graph_equals_numpy_density(measured, family):
     np.testing.assert_allclose([f(r) for r in rows], density.logpdf(rows), rtol=0, atol=1e-6)
 
 
-def test_gaussian_copula_with_normal_marginals_is_a_multivariate_normal(measured):
-    density = BackboneDensity.fit(measured, candidates=("norm",))
+@pytest.mark.parametrize("family", ["copula", "mvn"])
+def test_a_density_written_as_json_reads_back_as_the_same_density(duffing_assemblies, family):
+    levels = amplitude_levels(duffing_assemblies, n_levels=6, inset=0.1)
+    density = BackboneDensity.fit(
+        duffing_assemblies, levels, channels=("frequency_hz", "damping_ratio"), family=family
+    )
+    again = BackboneDensity.from_dict(json.loads(json.dumps(density.to_dict())))
+    assert (again.family, again.channels) == (family, density.channels)
+    assert [m.family for m in again.marginals] == [m.family for m in density.marginals]
+    np.testing.assert_array_equal(again.amplitudes_m, levels)
+    np.testing.assert_array_equal(again.observations, density.observations)
+    rows = np.vstack([density.observations[:3], density.sample(3, rng=4)])
+    np.testing.assert_array_equal(again.logpdf(rows), density.logpdf(rows))  # not a refit
+
+
+def test_gaussian_copula_with_normal_marginals_is_a_multivariate_normal(duffing_assemblies):
+    density = BackboneDensity.fit(duffing_assemblies, candidates=("norm",))
     sigma = np.array([m.params[1] for m in density.marginals])
     mu = np.array([m.params[0] for m in density.marginals])
     cov = density.correlation * np.outer(sigma, sigma)
@@ -65,8 +58,8 @@ def test_gaussian_copula_with_normal_marginals_is_a_multivariate_normal(measured
     np.testing.assert_allclose(density.logpdf(y), expected, rtol=1e-10)
 
 
-def test_samples_reproduce_the_measured_spread(measured):
-    density = BackboneDensity.fit(measured)
+def test_samples_reproduce_the_measured_spread(duffing_assemblies):
+    density = BackboneDensity.fit(duffing_assemblies)
     draws = density.sample(20_000, rng=2)
     np.testing.assert_allclose(draws.mean(0), density.observations.mean(0), rtol=2e-4)
     np.testing.assert_allclose(draws.std(0), density.observations.std(0, ddof=1), rtol=0.1)
@@ -86,14 +79,14 @@ def _duffing_backbone_graph(k_scale, k3, amplitudes):
     return pt.stack([pt.as_tensor(amplitudes), freq, pt.zeros_like(freq)], axis=1)
 
 
-def test_model_logp_is_the_density_at_the_prediction(measured):
-    levels = amplitude_levels(measured, n=7)
-    density = BackboneDensity.fit(measured, levels)
+def test_model_logp_is_the_density_at_the_prediction(duffing_assemblies):
+    levels = amplitude_levels(duffing_assemblies, n_levels=7)
+    density = BackboneDensity.fit(duffing_assemblies, levels)
     with pm.Model() as model:
         k_scale = pm.Uniform("k_scale", 0.95, 1.05)
         k3 = pm.Uniform("k3", 0.0, 3e10)
-        backbone = _duffing_backbone_graph(k_scale, k3, AMPS)
-        BackboneAmplitude("backbone", backbone, observed=measured, density=density)
+        backbone = _duffing_backbone_graph(k_scale, k3, POPULATION_AMPLITUDES_M)
+        BackboneAmplitude("backbone", backbone, observed=duffing_assemblies, density=density)
     point = model.initial_point()
     point["k_scale_interval__"] = 0.1
     logp_terms = model.compile_fn(
@@ -102,33 +95,35 @@ def test_model_logp_is_the_density_at_the_prediction(measured):
     got = float(np.sum(logp_terms(point)))
     k_scale_value = 0.95 + 0.1 / (1 + np.exp(-0.1))
     k3_value = 3e10 / 2
-    on_grid = np.sqrt(W0**2 * k_scale_value + 0.75 * k3_value * AMPS**2) / (2 * np.pi)
-    prediction = np.interp(levels, AMPS, on_grid)
+    on_grid = np.sqrt(W0**2 * k_scale_value + 0.75 * k3_value * POPULATION_AMPLITUDES_M**2) / (
+        2 * np.pi
+    )
+    prediction = np.interp(levels, POPULATION_AMPLITUDES_M, on_grid)
     assert got == pytest.approx(float(density.logpdf(prediction)), abs=1e-6)
 
 
-def test_metropolis_posterior_predictive_matches_the_measured_population(measured):
+def test_metropolis_posterior_predictive_matches_the_measured_population(duffing_assemblies):
     """The paper's scheme: posterior predictive backbones look like the measured ones."""
-    levels = amplitude_levels(measured, n=5)
+    levels = amplitude_levels(duffing_assemblies, n_levels=5)
     with pm.Model():
         k_scale = pm.Uniform("k_scale", 0.95, 1.05)
         k3 = pm.Uniform("k3", 0.0, 3e10)
-        backbone = _duffing_backbone_graph(k_scale, k3, AMPS)
-        BackboneAmplitude("backbone", backbone, observed=measured, levels=levels)
+        backbone = _duffing_backbone_graph(k_scale, k3, POPULATION_AMPLITUDES_M)
+        BackboneAmplitude("backbone", backbone, observed=duffing_assemblies, amplitudes_m=levels)
         idata = pm.sample(
             draws=1500, tune=500, chains=1, step=pm.Metropolis(), random_seed=1,
             progressbar=False, compute_convergence_checks=False,
         )  # fmt: skip
     predicted = idata.posterior["backbone_predicted"].values.reshape(-1, len(levels))
-    observed = measured.frequency_matrix(levels)
+    observed = duffing_assemblies.frequency_matrix(levels)
     for j in (0, len(levels) // 2, len(levels) - 1):
         assert stats.ks_2samp(predicted[::5, j], observed[:, j]).pvalue > 0.05
 
 
-def test_levels_outside_the_shared_range_raise(measured):
-    low, high = measured.common_range()
+def test_levels_outside_the_shared_range_raise(duffing_assemblies):
+    low, high = duffing_assemblies.common_range()
     with pytest.raises(ValueError, match="outside the range all measured curves share"):
-        BackboneDensity.fit(measured, [low, 0.5 * (low + high), 2 * high])
+        BackboneDensity.fit(duffing_assemblies, [low, 0.5 * (low + high), 2 * high])
 
 
 def test_curves_without_a_shared_range_raise():
@@ -138,8 +133,8 @@ def test_curves_without_a_shared_range_raise():
         BackboneDensity.fit(BackboneSet([a, b]))
 
 
-def test_nan_prediction_gives_minus_inf_and_is_counted(measured):
-    density = BackboneDensity.fit(measured)
+def test_nan_prediction_gives_minus_inf_and_is_counted(duffing_assemblies):
+    density = BackboneDensity.fit(duffing_assemblies)
     x = pt.vector("x")
     counted = NanCounter("test-nan")(x)
     f = pytensor.function([x], logp_graph(density, counted))
@@ -151,9 +146,9 @@ def test_nan_prediction_gives_minus_inf_and_is_counted(measured):
     assert any("returned NaN" in str(w.message) for w in caught)
 
 
-def test_far_predictions_are_unlikely_not_impossible(measured):
+def test_far_predictions_are_unlikely_not_impossible(duffing_assemblies):
     """A tail probability that underflows must not make a poor prediction impossible."""
-    density = BackboneDensity.fit(measured, candidates=("gumbel_l",))
+    density = BackboneDensity.fit(duffing_assemblies, candidates=("gumbel_l",))
     centre = density.observations.mean(axis=0)
     spread = density.observations.std(axis=0)
     v = pt.vector("v")

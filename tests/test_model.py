@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from identification.model import JointModel, Term
+from identification.model import JointModel, Term, parameter_bounds
+from identification.rig import RIG_PRESETS
 
 PAPER_EQ3 = dict(
     k1=4.49e5, k2=1.85, k3=2.60e7, k4=2.95e4, k5=60.5, k6=3.32e9,
@@ -126,3 +127,18 @@ def test_bad_json_raises_naming_the_item(tmp_path, payload, message):
 def test_unknown_preset_lists_the_available_ones():
     with pytest.raises(ValueError, match="pandey2025"):
         JointModel.preset("nope")
+
+
+def test_parameter_bounds_are_sign_aware():
+    model = JointModel.preset("pandey2025")  # has negative coefficients
+    names = ["linear_stiffness", "cubic_stiffness", "van_der_pol"]
+    box = parameter_bounds(model, names, {"linear_stiffness": 0.1, "cubic_stiffness": 0.5,
+                                        "van_der_pol": 0.2})  # fmt: skip
+    values = np.array([model.parameters[n] for n in names])
+    np.testing.assert_allclose(box[0], [0.9 * values[0], 1.1 * values[0]])
+    np.testing.assert_allclose(box[1], [1.5 * values[1], 0.5 * values[1]])  # negative
+    assert np.all(box[:, 0] < values) and np.all(values < box[:, 1])
+    with pytest.raises(ValueError, match=r"shape parameter .microslip\.F_s. must stay > 0"):
+        parameter_bounds(RIG_PRESETS["trc-like"].model, ["microslip.F_s"], 1.5)
+    with pytest.raises(ValueError, match="unknown parameter 'k9'"):
+        parameter_bounds(RIG_PRESETS["trc-like"].model, ["k9"])

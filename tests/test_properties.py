@@ -39,7 +39,7 @@ from identification.measurements.backbone import Backbone
 from identification.measurements.extraction import extract_backbone
 from identification.measurements.records import DATA_COLUMNS, Record, StepSchedule, read_record
 from identification.model import JointModel
-from pm_joint.likelihood import BackboneDensity
+from pm_joint.distributions import BackboneDensity
 from surrogates.runtime import MODEL_FILE, SIDECAR_FILE, SurrogateRuntime, SurrogateSpec
 
 sys.path.insert(0, str(Path(__file__).parent))

@@ -12,16 +12,12 @@ from arviz_base import from_dict
 from identification.analytical import harmonic
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
-from pm_joint.likelihood import BackboneDensity, amplitude_levels, level_marks
-from pm_joint.report import (
-    _pair_groups,
-    correlation_matrix,
-    default_var_names,
-    level_pdfs,
-    plot_level_pdfs,
-    report,
-    summarize,
-)
+from pm_joint.analysis import correlation_matrix, default_var_names, level_pdfs, summarize
+from pm_joint.distributions import BackboneDensity, amplitude_levels, level_marks
+from pm_joint.inference import load_posterior, save_posterior
+from pm_joint.plotting import plot_level_pdfs
+from pm_joint.plotting.posterior import _pair_groups
+from pm_joint.report_folder import report
 
 W0 = 2 * np.pi * 100.0
 AMPS = np.linspace(5e-5, 1.5e-3, 30)
@@ -58,7 +54,7 @@ def density(measured):
 
 
 def trace(theta, predicted, density, **attrs):
-    """A DataTree shaped like pm_joint.updating.sample's (2 chains × 500 draws)."""
+    """A DataTree shaped like pm_joint.sample's (2 chains × 500 draws)."""
     rng = np.random.default_rng(7)
     posterior = {n: theta[:, j].reshape(CHAINS, DRAWS) for j, n in enumerate(NAMES)}
     posterior["backbone_predicted"] = predicted.reshape(CHAINS, DRAWS, -1)
@@ -110,7 +106,7 @@ def test_level_pdfs_reject_a_shift_of_three_standard_deviations(density, same_po
 def test_a_density_fitted_elsewhere_is_refused(measured, density, same_population):
     idata = trace(*same_population, density)
     with pytest.raises(ValueError, match="levels"):
-        level_pdfs(idata, BackboneDensity.fit(measured, amplitude_levels(measured, n=7)))
+        level_pdfs(idata, BackboneDensity.fit(measured, amplitude_levels(measured, n_levels=7)))
     other_levels = amplitude_levels(measured, inset=0.1)  # same count, other amplitudes
     with pytest.raises(ValueError, match="observed_data"):
         level_pdfs(idata, BackboneDensity.fit(measured, other_levels))
@@ -172,9 +168,25 @@ def test_report_fits_the_default_density_when_none_is_given(tmp_path, measured, 
     # The trace's observed values come from the default levels, so the default fit matches.
     default = BackboneDensity.fit(measured, candidates=("norm",))
     idata = trace(*same_population, default)
-    result = report(idata, measured, var_names=["cubic_stiffness"], out=tmp_path)
+    with pytest.warns(UserWarning, match="no likelihood density is stored"):
+        result = report(idata, measured, var_names=["cubic_stiffness"], out=tmp_path)
     assert result["var_names"] == ["cubic_stiffness"]
     assert all((tmp_path / name).is_file() for name in result["files"])
+
+
+def test_report_draws_the_density_stored_with_the_posterior(tmp_path, measured, same_population):
+    # Levels other than the default: a default refit would not match the trace.
+    stored = BackboneDensity.fit(measured, amplitude_levels(measured, inset=0.1), family="mvn")
+    theta, _ = same_population
+    path = save_posterior(
+        trace(theta, frequencies(theta, stored.amplitudes_m), stored), tmp_path / "p.nc",
+        density=stored,
+    )  # fmt: skip
+    result = report(load_posterior(path), measured, out=tmp_path / "report")
+    for level, entry in result["level_pdfs"].items():
+        expected = 1e3 * stored.amplitudes_m[level_marks(stored.amplitudes_m)[level]]
+        assert entry["amplitude_mm"] == pytest.approx(expected, rel=1e-12)
+        assert entry["distances"]["ks_pvalue"] > 0.05, level
 
 
 def test_pair_matrices_hold_six_parameters_and_never_one_alone():

@@ -14,10 +14,10 @@ Unit-level tests elsewhere:
 * Likelihood of a NaN prediction: ``tests/test_likelihood.py::
   test_nan_prediction_gives_minus_inf_and_is_counted``.
 
-Here the same failures go through :func:`pm_joint.updating.build_model`: the
+Here the same failures go through :func:`pm_joint.build_model`: the
 model's log density at a parameter vector where the forward model fails is
 -inf (a sampler rejects the proposal and goes on), the likelihood's
-:class:`~pm_joint.likelihood.NanCounter` and the forward Op count it, and the
+:class:`~pm_joint.distributions.NanCounter` and the forward Op count it, and the
 log density at a good vector stays finite. The rig refuses to write a record
 of a model that diverges. A long record is read block by block, with progress.
 """
@@ -31,42 +31,20 @@ import pymc as pm
 import pytensor.tensor as pt
 import pytest
 
-from identification.analytical import harmonic
 from identification.measurements import records
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.records import DATA_COLUMNS, StepSchedule, read_record
-from identification.model import JointModel
 from identification.rig import Rig
+from pm_joint.distributions import BackboneAmplitude, NanCounter
 from pm_joint.forward import SurrogateOp
-from pm_joint.likelihood import BackboneAmplitude, NanCounter
-from pm_joint.updating import build_model
+from pm_joint.inference import build_model
 from surrogates.runtime import SurrogateRuntime, SurrogateSpec
 
 sys.path.insert(0, str(Path(__file__).parent))
+from oscillators import duffing
 from toy_surrogate import amplitude_frequency_weights, write_surrogate
 
 OMEGA = 2 * np.pi * 100.0
-
-
-def duffing(stiffness_scale=1.0, cubic=1e10, damping=2 * 0.004 * OMEGA) -> JointModel:
-    return JointModel(
-        {
-            "linear_stiffness": OMEGA**2 * stiffness_scale,
-            "viscous_damping": damping,
-            "cubic_stiffness": cubic,
-        }
-    )
-
-
-@pytest.fixture(scope="module")
-def measured():
-    """Three harmonic-balance backbones of slightly different Duffing oscillators."""
-    amplitudes = np.linspace(5e-5, 1.5e-3, 12)
-    curves = []
-    for i, (scale, cubic) in enumerate([(0.99, 0.8e10), (1.0, 1.0e10), (1.01, 1.2e10)]):
-        hb = harmonic.backbone(duffing(scale, cubic), amplitudes)
-        curves.append(Backbone(hb.amplitude_m, hb.frequency_hz, hb.damping_ratio, label=f"c{i}"))
-    return BackboneSet(curves)
 
 
 def log_density(pm_model, values: dict[str, float]) -> float:
@@ -88,11 +66,17 @@ def _failures() -> int:
     return NanCounter.counts.get("backbone", 0)
 
 
-def test_pll_forward_model_that_diverges_gives_minus_inf_and_is_counted(measured):
+def test_pll_forward_model_that_diverges_gives_minus_inf_and_is_counted(duffing_triplet):
     names = ["linear_stiffness", "viscous_damping"]
     bounds = {"linear_stiffness": (0.5 * OMEGA**2, 1.5 * OMEGA**2), "viscous_damping": (-30, 40)}
     pm_model = build_model(
-        duffing(), measured, forward="pll", names=names, bounds=bounds, family="mvn", n_grid=5
+        duffing(),
+        duffing_triplet,
+        forward="pll",
+        names=names,
+        bounds=bounds,
+        family="mvn",
+        n_grid=5,
     )
     op = pm_model.forward_op
     before, failed = _failures(), op.n_failed
@@ -103,11 +87,11 @@ def test_pll_forward_model_that_diverges_gives_minus_inf_and_is_counted(measured
     assert (_failures(), op.n_failed) == (before + 1, failed + 1)
 
 
-def test_harmonic_forward_model_without_a_backbone_gives_minus_inf_and_is_counted(measured):
+def test_harmonic_forward_model_without_a_backbone_gives_minus_inf_and_is_counted(duffing_triplet):
     names = ["linear_stiffness", "cubic_stiffness"]
     bounds = {"linear_stiffness": (-(OMEGA**2), 2 * OMEGA**2), "cubic_stiffness": (0.0, 2e10)}
     pm_model = build_model(
-        duffing(), measured, forward="harmonic", names=names, bounds=bounds, family="mvn"
+        duffing(), duffing_triplet, forward="harmonic", names=names, bounds=bounds, family="mvn"
     )
     before = _failures()
     assert np.isfinite(
@@ -171,7 +155,7 @@ def test_a_surrogate_inside_its_box_is_not_counted_as_a_failure(surrogate, toy_m
 
 
 def test_rig_refuses_a_model_that_diverges(tmp_path):
-    rig = Rig(duffing(damping=-50.0), (0.05, 0.1), hold_s=0.3, ramp_s=0.05)
+    rig = Rig(duffing(damping_ratio=-50.0 / (2 * OMEGA)), (0.05, 0.1), hold_s=0.3, ramp_s=0.05)
     with pytest.raises(RuntimeError, match=r"Config1_PRT_Assemb1: .*diverged"):
         rig.write_campaign(tmp_path, assemblies=1)
     assert not any(tmp_path.iterdir())  # nothing half-written

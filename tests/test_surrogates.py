@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 import torch
 
-from surrogates.evaluate import PAPER_TABLE5, backbone_metrics, table5_study
+from pm_joint.studies import table5_study
+from surrogates.evaluate import PAPER_TABLE5, backbone_metrics
 from surrogates.export import export_surrogate
 from surrogates.nets import Autoencoder, KerasConv1d, LatentRegressor, NetConfig
 from surrogates.runtime import SurrogateRuntime, SurrogateSpec

@@ -29,18 +29,18 @@ from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.extraction import extract_backbones
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS, Rig, read_ground_truth
+from pm_joint.distributions import BackboneDensity, NanCounter, amplitude_levels, level_marks
 from pm_joint.forward import HarmonicBalanceGraph, PLLOp, SurrogateOp
-from pm_joint.likelihood import NanCounter, amplitude_levels, level_marks
-from pm_joint.updating import (
+from pm_joint.inference import (
     build_model,
     continue_sampling,
     hierarchical_model,
     load_posterior,
-    population_coverage,
     sample,
     save_posterior,
-    synthetic_campaign,
+    stored_density,
 )
+from pm_joint.studies import population_coverage, synthetic_campaign
 from surrogates import (
     NetConfig,
     SurrogateRuntime,
@@ -168,9 +168,9 @@ def _check_posterior_against_the_rig(rig, measured):
     }
     # Damping too, so that the viscous damping the rig varies is informed; the joint density
     # is a multivariate normal over 5 levels × 2 channels, which 25 curves estimate well.
-    levels = amplitude_levels(measured, n=5)
+    levels = amplitude_levels(measured, n_levels=5)
     pm_model = build_model(
-        rig.model, measured, forward="harmonic", names=names, bounds=bounds, levels=levels,
+        rig.model, measured, forward="harmonic", names=names, bounds=bounds, amplitudes_m=levels,
         channels=("frequency_hz", "damping_ratio"), family="mvn",
     )  # fmt: skip
     idata = sample(pm_model, sampler="nuts", draws=1000, tune=500, chains=2, progressbar=False)
@@ -257,9 +257,11 @@ def test_curves_without_a_shared_range_and_levels_outside_it_raise():
         build_model(DUFFING, apart, names=NAMES, bounds=BOUNDS)
     low, high = measured.common_range()
     with pytest.raises(ValueError, match="outside the range all measured curves share"):
-        build_model(DUFFING, measured, names=NAMES, bounds=BOUNDS, levels=[low, 2 * high, 3 * high])
+        build_model(
+            DUFFING, measured, names=NAMES, bounds=BOUNDS, amplitudes_m=[low, 2 * high, 3 * high]
+        )
     with pytest.raises(ValueError, match="range all measured curves share"):
-        hierarchical_model(DUFFING, measured, NAMES, levels=[0.5 * low, high])
+        hierarchical_model(DUFFING, measured, NAMES, amplitudes_m=[0.5 * low, high])
 
 
 def test_a_surrogate_must_match_the_priors(duffing_surrogate):
@@ -354,12 +356,31 @@ def test_a_trace_folder_reads_back_as_the_run_returned_it(tmp_path):
         load_posterior(tmp_path / "missing.nc")
 
 
+def test_the_likelihood_density_travels_with_the_draws(tmp_path):
+    measured = _duffing_curves()
+    density = BackboneDensity.fit(measured, amplitude_levels(measured, n_levels=5), family="mvn")
+    pm_model = build_model(DUFFING, measured, names=NAMES, bounds=BOUNDS, density=density)
+    assert pm_model.backbone_density is density  # used as given, not refitted
+    with pytest.raises(ValueError, match="not both"):
+        build_model(DUFFING, measured, density=density, amplitudes_m=density.amplitudes_m)
+    normal = _normal_model()
+    normal.backbone_density = density
+    idata = sample(
+        normal, sampler="demetropolisz", draws=50, tune=50, chains=1, cores=1, progressbar=False
+    )
+    kept = stored_density(load_posterior(save_posterior(idata, tmp_path / "p.nc")))
+    np.testing.assert_array_equal(kept.amplitudes_m, density.amplitudes_m)
+    np.testing.assert_array_equal(kept.correlation, density.correlation)
+    plain = sample(_normal_model(), draws=20, tune=20, chains=1, cores=1, progressbar=False)
+    assert stored_density(plain) is None  # no backbone likelihood, nothing stored
+
+
 def test_a_killed_run_leaves_its_draws(tmp_path):
     """Sampling in a child process, killed mid-run: the draws written so far read back."""
     folder = tmp_path / "killed.zarr"
     script = (
         "import pymc as pm\n"
-        "from pm_joint.updating import sample\n"
+        "from pm_joint.inference import sample\n"
         "with pm.Model() as model:\n"
         "    pm.Normal('x', 0.0, 1.0, shape=2)\n"
         f"sample(model, draws=10**7, tune=200, chains=2, cores=2, progressbar=False, "

@@ -49,9 +49,9 @@ __all__ = [
     "FitResult",
     "default_free",
     "default_shape_grid",
-    "fit_scale",
     "evaluate",
     "fit_backbones",
+    "fit_scale",
     "shape_bounds",
 ]
 

@@ -9,6 +9,8 @@ a rippling multiply-and-low-pass PLL, drift, dropouts
 named scenarios of both.
 """
 
+from typing import Any
+
 from identification.rig.lab import LabAssembly, LabRig
 from identification.rig.presets import (
     HIDDEN_EFFECT_SCENARIOS,
@@ -28,6 +30,18 @@ from identification.rig.rig import (
     trc_channels,
 )
 
+
+def rig_for_preset(name: str, levels: int = 10, **options: Any) -> Rig:
+    """The rig of a named preset: a :class:`LabRig` for lab scenarios, else a :class:`Rig`.
+
+    ``levels`` is the number of hold phases; other keywords as :meth:`Rig.preset`.
+    """
+    if name not in RIG_PRESETS:
+        raise ValueError(f"unknown rig preset {name!r}; available: {', '.join(RIG_PRESETS)}")
+    engine = LabRig if RIG_PRESETS[name].lab is not None else Rig
+    return engine.preset(name, levels=levels, **options)
+
+
 __all__ = [
     "GROUND_TRUTH_FILE",
     "HIDDEN_EFFECT_SCENARIOS",
@@ -43,5 +57,6 @@ __all__ = [
     "first_bending_shape",
     "levels_for_amplitudes",
     "read_ground_truth",
+    "rig_for_preset",
     "trc_channels",
 ]

@@ -60,7 +60,7 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numba
 import numpy as np
@@ -436,6 +436,8 @@ class LabRig(Rig):
     controller: Controller = field(default_factory=Controller)
     drift: Drift = field(default_factory=Drift)
     sensors: Sensors = field(default_factory=Sensors)
+
+    takes_lab_settings: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         joints = tuple(self.joints)

@@ -41,7 +41,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -214,6 +214,9 @@ class Rig:
     hidden_effects: tuple[str, ...] = ()
     pll_options: Mapping[str, Any] = field(default_factory=dict)
 
+    #: Whether the class takes a preset's lab settings (the lab engine does).
+    takes_lab_settings: ClassVar[bool] = False
+
     def __post_init__(self) -> None:
         levels = tuple(float(v) for v in np.atleast_1d(self.levels_v))
         if not levels or not all(math.isfinite(v) and v > 0 for v in levels):
@@ -263,7 +266,7 @@ class Rig:
         amplitude_range_mm: tuple[float, float] = (0.05, 2.0),
         **options: Any,
     ) -> Rig:
-        """A rig from :data:`RIG_PRESETS`.
+        """A rig from :data:`RIG_PRESETS`; lab scenarios: :func:`identification.rig.rig_for_preset`.
 
         Parameters
         ----------
@@ -291,11 +294,11 @@ class Rig:
                 f"need levels ≥ 1 and 0 < low < high, got {levels}, {amplitude_range_mm}"
             )
         amplitudes = 1e-3 * np.geomspace(low, high, levels)
-        rig_class = cls
-        if preset.lab is not None:  # a lab scenario: the lab engine and its artefacts
-            from identification.rig.lab import LabRig  # the lab rig builds on this module
-
-            rig_class = LabRig
+        if preset.lab is not None and not cls.takes_lab_settings:
+            raise ValueError(
+                f"rig preset {name!r} is a lab scenario: build it with "
+                "identification.rig.rig_for_preset (or LabRig.preset)"
+            )
         settings = {
             "variability": dict(preset.variability),
             "name": name,
@@ -305,7 +308,7 @@ class Rig:
             **(preset.lab or {}),
             **options,
         }
-        return rig_class.for_amplitudes(preset.model, amplitudes, **settings)
+        return cls.for_amplitudes(preset.model, amplitudes, **settings)
 
     # ------------------------------------------------------------ drawing
     def _variable_parameters(self) -> list[str]:

@@ -10,7 +10,9 @@ Wasserstein distances between samples.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -60,7 +62,7 @@ class DistributionFit:
         """The frozen scipy.stats distribution."""
         return getattr(stats, self.family)(*self.params)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "family": self.family,
             "params": [float(p) for p in self.params],
@@ -69,6 +71,15 @@ class DistributionFit:
             "bic": self.bic,
             "aicc": self.aicc,
         }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> DistributionFit:
+        """Inverse of :meth:`to_dict`."""
+        return cls(
+            family=data["family"],
+            params=tuple(float(p) for p in data["params"]),
+            **{k: float(data[k]) for k in ("loglik", "aic", "bic", "aicc")},
+        )
 
 
 def _clean(samples: ArrayLike, what: str) -> np.ndarray:

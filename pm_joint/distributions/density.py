@@ -1,66 +1,47 @@
-"""The backbone-amplitude likelihood of the paper, as a PyMC distribution.
+"""The joint density of measured backbone values across amplitude levels.
 
 At chosen amplitude levels every measured backbone gives a frequency (and,
 optionally, a damping ratio). Across the measured curves these values form a
 joint distribution: per-level marginals (the best scipy.stats family by AIC)
-joined by a Gaussian copula, or a multivariate normal. A parameter vector is
-scored by that joint density at the forward model's prediction interpolated to
-the same levels. The posterior then describes the population of assemblies
-the measurements came from, which is what the paper's updating is after.
-
-:class:`BackboneDensity` is the fitted joint density (numpy, scipy);
-:func:`logp_graph` is the same density as a pytensor graph (so NUTS can
-differentiate through it); :func:`BackboneAmplitude` puts it into a PyMC model.
+joined by a Gaussian copula, or a multivariate normal. :class:`BackboneDensity`
+is that fitted density (numpy, scipy); the same density as a pytensor graph
+and as a PyMC distribution is in :mod:`pm_joint.distributions.backbone_amplitude`.
 """
 
 from __future__ import annotations
 
-import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
-import numba
 import numpy as np
-import pymc as pm
-import pytensor.tensor as pt
 from numpy.typing import ArrayLike
-from pytensor.graph.basic import Apply
-from pytensor.graph.op import Op
-from pytensor.link.numba.dispatch.basic import numba_njit, register_funcify_default_op_cache_key
 from scipy import stats
 from sklearn.covariance import ledoit_wolf_shrinkage
 
 from identification.measurements.backbone import BackboneSet
-from pm_joint.fitting import UNBOUNDED_CANDIDATES, DistributionFit, fit_best
-from pm_joint.forward import BACKBONE_COLUMNS
+from pm_joint.distributions.families import UNBOUNDED_CANDIDATES, DistributionFit, fit_best
 
-__all__ = [
-    "BackboneAmplitude",
-    "BackboneDensity",
-    "amplitude_levels",
-    "interpolate_backbone",
-    "level_marks",
-    "logp_graph",
-]
+__all__ = ["CHANNELS", "BackboneDensity", "amplitude_levels", "level_marks"]
 
 CHANNELS = ("frequency_hz", "damping_ratio")
 
 
-def amplitude_levels(measured: BackboneSet, n: int = 9, inset: float = 0.02) -> np.ndarray:
-    """A grid of ``n`` amplitudes (m) over the range all measured curves share.
+def amplitude_levels(measured: BackboneSet, n_levels: int = 9, inset: float = 0.02) -> np.ndarray:
+    """A grid of ``n_levels`` amplitudes (m) over the range all measured curves share.
 
     ``inset`` trims that fraction of the range at both ends so that every
     curve is interpolated, never extrapolated.
     """
-    if n < 3:
-        raise ValueError(f"need at least 3 amplitude levels (low, mid, high), got {n}")
+    if n_levels < 3:
+        raise ValueError(f"need at least 3 amplitude levels (low, mid, high), got {n_levels}")
     low, high = measured.common_range()
     if not high > low:
         raise ValueError(
             f"the measured backbones share no amplitude range (common range {low:.4g}–{high:.4g} m)"
         )
     span = high - low
-    return np.linspace(low + inset * span, high - inset * span, n)
+    return np.linspace(low + inset * span, high - inset * span, n_levels)
 
 
 def level_marks(amplitudes_m: ArrayLike) -> dict[str, int]:
@@ -113,7 +94,7 @@ class BackboneDensity:
     family
         ``"copula"`` (fitted marginals + Gaussian copula) or ``"mvn"``.
     marginals
-        One :class:`~pm_joint.fitting.DistributionFit` per dimension (copula).
+        One :class:`~pm_joint.distributions.families.DistributionFit` per dimension (copula).
     correlation
         Copula correlation of the normal scores, or the MVN covariance.
     mean
@@ -233,14 +214,39 @@ class BackboneDensity:
         out = np.where(np.any(np.isnan(y), axis=-1), -np.inf, out)
         return np.nan_to_num(out, nan=-np.inf)
 
-    def sample(self, n: int, rng: np.random.Generator | int | None = None) -> np.ndarray:
-        """Draw ``n`` synthetic measured curves (n, n_dims) from the density."""
+    def sample(self, n_curves: int, rng: np.random.Generator | int | None = None) -> np.ndarray:
+        """Draw ``n_curves`` synthetic measured curves (n_curves, n_dims) from the density."""
         rng = np.random.default_rng(rng)
         if self.family == "mvn":
-            return rng.multivariate_normal(self.mean, self.correlation, size=n)
-        z = rng.multivariate_normal(np.zeros(self.n_dims), self.correlation, size=n)
+            return rng.multivariate_normal(self.mean, self.correlation, size=n_curves)
+        z = rng.multivariate_normal(np.zeros(self.n_dims), self.correlation, size=n_curves)
         u = stats.norm.cdf(z)
         return np.column_stack([m.dist.ppf(u[:, j]) for j, m in enumerate(self.marginals)])
+
+    def to_dict(self) -> dict[str, Any]:
+        """Everything the density is made of, as JSON types (floats kept exactly)."""
+        return {
+            "amplitudes_m": self.amplitudes_m.tolist(),
+            "channels": list(self.channels),
+            "observations": self.observations.tolist(),
+            "family": self.family,
+            "marginals": [m.to_dict() for m in self.marginals],
+            "correlation": self.correlation.tolist(),
+            "mean": self.mean.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> BackboneDensity:
+        """Inverse of :meth:`to_dict`: the same density, not a refit."""
+        return cls(
+            amplitudes_m=np.asarray(data["amplitudes_m"], dtype=float),
+            channels=tuple(data["channels"]),
+            observations=np.asarray(data["observations"], dtype=float),
+            family=data["family"],
+            marginals=tuple(DistributionFit.from_dict(m) for m in data["marginals"]),
+            correlation=np.asarray(data["correlation"], dtype=float),
+            mean=np.asarray(data["mean"], dtype=float),
+        )
 
     def split(self, values: ArrayLike) -> dict[str, np.ndarray]:
         """Split (..., n_dims) values into one (..., n_levels) array per channel."""
@@ -258,218 +264,14 @@ def _shrinkage(values: np.ndarray) -> float:
 #: Log-probabilities are floored here before Φ⁻¹ (|z| ≤ 37): far beyond the
 #: measured spread the marginal log density already decides, and a tail
 #: probability that underflows to 0 would turn a poor fit into logp = -inf.
-_LOG_TAIL_FLOOR = -700.0
+LOG_TAIL_FLOOR = -700.0
 
 
 def _normal_scores(fit: DistributionFit, values: np.ndarray) -> np.ndarray:
     """Φ⁻¹(F(y)) through log-probabilities, accurate in both tails."""
     dist = fit.dist
-    lower = np.maximum(dist.logcdf(values), _LOG_TAIL_FLOOR)
-    upper = np.maximum(dist.logsf(values), _LOG_TAIL_FLOOR)
+    lower = np.maximum(dist.logcdf(values), LOG_TAIL_FLOOR)
+    upper = np.maximum(dist.logsf(values), LOG_TAIL_FLOOR)
     return np.where(
         lower < np.log(0.5), stats.norm.ppf(np.exp(lower)), -stats.norm.ppf(np.exp(upper))
-    )
-
-
-# ---------------------------------------------------------------------------
-# pytensor graph of the same density
-
-
-def _marginal_graph(fit: DistributionFit, y):
-    """(logpdf, logcdf, logsf) of a fitted scipy family as pytensor expressions."""
-    p = fit.params
-    family = fit.family
-    if family == "gumbel_l":  # the mirror image of gumbel_r
-        dist = pm.Gumbel.dist(mu=-p[0], beta=p[1])
-        return pm.logp(dist, -y), pm.logccdf(dist, -y), pm.logcdf(dist, -y)
-    shifted = y
-    if family == "norm":
-        dist = pm.Normal.dist(mu=p[0], sigma=p[1])
-    elif family == "logistic":
-        dist = pm.Logistic.dist(mu=p[0], s=p[1])
-    elif family == "t":
-        dist = pm.StudentT.dist(nu=p[0], mu=p[1], sigma=p[2])
-    elif family == "gumbel_r":
-        dist = pm.Gumbel.dist(mu=p[0], beta=p[1])
-    elif family == "lognorm":
-        dist, shifted = pm.LogNormal.dist(mu=np.log(p[2]), sigma=p[0]), y - p[1]
-    elif family == "gamma":
-        dist, shifted = pm.Gamma.dist(alpha=p[0], beta=1.0 / p[2]), y - p[1]
-    elif family == "weibull_min":
-        dist, shifted = pm.Weibull.dist(alpha=p[0], beta=p[2]), y - p[1]
-    else:
-        raise ValueError(f"no pytensor form for the {family!r} family")
-    return pm.logp(dist, shifted), pm.logcdf(dist, shifted), pm.logccdf(dist, shifted)
-
-
-def _normal_score_graph(logcdf, logsf):
-    # Φ⁻¹(u) = −√2 erfcinv(2u): from the lower tail below the median, from the
-    # upper tail above it, so neither branch loses precision.
-    logcdf = pt.maximum(logcdf, _LOG_TAIL_FLOOR)
-    logsf = pt.maximum(logsf, _LOG_TAIL_FLOOR)
-    lower = -np.sqrt(2.0) * pt.erfcinv(2.0 * pt.exp(logcdf))
-    upper = np.sqrt(2.0) * pt.erfcinv(2.0 * pt.exp(logsf))
-    return pt.switch(logcdf < np.log(0.5), lower, upper)
-
-
-def logp_graph(density: BackboneDensity, values):
-    """The density's log value at ``values`` (pytensor, (..., n_dims) → (...))."""
-    y = pt.as_tensor_variable(values)
-    if density.family == "mvn":
-        logp = pm.logp(pm.MvNormal.dist(mu=density.mean, cov=density.correlation), y)
-    else:
-        parts = [_marginal_graph(m, y[..., j]) for j, m in enumerate(density.marginals)]
-        log_marginal = pt.sum(pt.stack([lp for lp, _, _ in parts], axis=-1), axis=-1)
-        z = pt.stack([_normal_score_graph(lc, ls) for _, lc, ls in parts], axis=-1)
-        precision = np.linalg.inv(density.correlation) - np.eye(density.n_dims)
-        _, logdet = np.linalg.slogdet(density.correlation)
-        quad = pt.sum(pt.dot(z, precision) * z, axis=-1)
-        logp = log_marginal - 0.5 * quad - 0.5 * logdet
-    return pt.switch(pt.any(pt.isnan(y), axis=-1) | pt.isnan(logp), -np.inf, logp)
-
-
-# ---------------------------------------------------------------------------
-# forward-model output → values at the levels
-
-
-class NanCounter(Op):
-    """Identity that counts (and warns about) forward-model outputs with NaN.
-
-    A forward model that fails for some parameter vector returns NaN; the
-    likelihood turns that into logp = -inf so a chain rejects the proposal
-    and goes on. This Op keeps the count (per process) so it can be reported.
-    Under the numba backend it runs natively (see :func:`_numba_nan_counter`).
-    """
-
-    __props__ = ("label",)
-
-    def __init__(self, label: str) -> None:
-        self.label = label
-
-    counts: dict[str, int] = {}  # noqa: RUF012 - a shared tally across instances is the point
-
-    def make_node(self, x):
-        x = pt.as_tensor_variable(x)
-        return Apply(self, [x], [x.type()])
-
-    def perform(self, node, inputs, outputs):
-        (x,) = inputs
-        if np.isnan(x).any():
-            _count_nan(self.label)
-        outputs[0][0] = np.array(x, copy=True)
-
-    def pullback(self, inputs, outputs, cotangents):
-        return [cotangents[0]]
-
-
-def _count_nan(label: str) -> None:
-    """One more NaN output under ``label``; warn at 1, 10, 100, 1000 and every 10 000."""
-    n = NanCounter.counts.get(label, 0) + 1
-    NanCounter.counts[label] = n
-    if n in (1, 10, 100, 1000) or n % 10_000 == 0:
-        warnings.warn(
-            f"{label}: forward model returned NaN {n} time(s); those proposals get logp = -inf",
-            RuntimeWarning,
-            stacklevel=2,
-        )
-
-
-@register_funcify_default_op_cache_key(NanCounter)
-def _numba_nan_counter(op, node=None, **kwargs):
-    # Python's perform would run in numba object mode: a per-call toll and, worse,
-    # a compiled logp that numba cannot cache. Natively, only the rare NaN call
-    # drops to object mode to count.
-    label = op.label
-
-    @numba_njit
-    def nan_counter(x):
-        if np.isnan(x).any():
-            with numba.objmode():
-                _count_nan(label)
-        return x.copy()
-
-    return nan_counter
-
-
-def interpolate_backbone(backbone, amplitudes_m: ArrayLike, channels: Sequence[str]):
-    """Values of a predicted backbone at amplitude levels (pytensor, channel-major).
-
-    ``backbone`` is a (n_points, 3) tensor in the common layout
-    ``[amplitude_m, frequency_hz, damping_ratio]``. Levels outside the predicted
-    amplitude range give NaN (the prediction does not reach them), never a
-    clamped end value.
-    """
-    backbone = pt.as_tensor_variable(backbone)
-    order = pt.argsort(backbone[:, 0])
-    amplitude = backbone[order, 0]
-    levels = np.asarray(amplitudes_m, dtype=float)
-    blocks = []
-    for channel in channels:
-        column = BACKBONE_COLUMNS.index(channel)
-        blocks.append(
-            pt.interp(levels, amplitude, backbone[order, column], left=np.nan, right=np.nan)
-        )
-    return pt.concatenate(blocks)
-
-
-def BackboneAmplitude(
-    name: str,
-    backbone,
-    *,
-    observed: BackboneSet | ArrayLike,
-    levels: ArrayLike | None = None,
-    channels: Sequence[str] = ("frequency_hz",),
-    family: str = "copula",
-    density: BackboneDensity | None = None,
-):
-    """The paper's backbone-amplitude likelihood inside a ``pm.Model``.
-
-    Parameters
-    ----------
-    name
-        Name of the observed variable.
-    backbone
-        Forward-model output in the common layout, (n_points, 3).
-    observed
-        The measured backbones (a BackboneSet), or a ready matrix with ``levels``.
-    levels
-        Amplitude levels (m); default: a grid over the range all curves share.
-    channels
-        ``("frequency_hz",)`` (the paper) or with ``"damping_ratio"``.
-    family
-        ``"copula"`` or ``"mvn"`` (see :class:`BackboneDensity`).
-    density
-        A ready :class:`BackboneDensity` (skips fitting).
-
-    Notes
-    -----
-    Each row of the observed matrix (one measured curve) carries 1/n_curves of
-    ``log p(prediction)``, so the sum PyMC forms is the paper's log-likelihood
-    and the measured values are kept in the trace's ``observed_data``. Draws of
-    the variable (prior/posterior predictive) are the model's prediction at the
-    levels, to be compared with the measured population. The prediction is
-    stored as the deterministic ``{name}_predicted``.
-    """
-    density = density or BackboneDensity.fit(observed, levels, channels=channels, family=family)
-    # Counted at the levels: NaN there (and only there) is what makes logp = -inf.
-    predicted = NanCounter(name)(
-        interpolate_backbone(backbone, density.amplitudes_m, density.channels)
-    )
-    predicted = pm.Deterministic(f"{name}_predicted", predicted)
-    n_curves = density.observations.shape[0]
-
-    def logp(value, prediction):
-        return pt.zeros(value.shape[:-1]) + logp_graph(density, prediction) / n_curves
-
-    def random(prediction, rng=None, size=None):
-        shape = (*(size or ()), prediction.shape[-1])
-        return np.broadcast_to(prediction, shape).copy()
-
-    return pm.CustomDist(
-        name,
-        predicted,
-        logp=logp,
-        random=random,
-        signature="(d)->(d)",
-        observed=density.observations,
     )

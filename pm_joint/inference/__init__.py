@@ -1,0 +1,37 @@
+"""Stochastic updating in PyMC: the models, their sampling and their posteriors on disk.
+
+:mod:`~pm_joint.inference.models` builds the ``pm.Model`` objects (the paper's
+population matching and the hierarchical model), :mod:`~pm_joint.inference.sampling`
+samples them, :mod:`~pm_joint.inference.storage` keeps posteriors (netCDF files and
+zarr traces) with the likelihood they were sampled with.
+"""
+
+from pm_joint.inference.models import (
+    amplitudes_within_surrogate,
+    build_model,
+    hierarchical_model,
+    uniform_priors,
+)
+from pm_joint.inference.sampling import SAMPLERS, continue_sampling, sample
+from pm_joint.inference.storage import (
+    attach_density,
+    load_posterior,
+    posterior_sha256,
+    save_posterior,
+    stored_density,
+)
+
+__all__ = [
+    "SAMPLERS",
+    "amplitudes_within_surrogate",
+    "attach_density",
+    "build_model",
+    "continue_sampling",
+    "hierarchical_model",
+    "load_posterior",
+    "posterior_sha256",
+    "sample",
+    "save_posterior",
+    "stored_density",
+    "uniform_priors",
+]

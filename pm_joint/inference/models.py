@@ -1,0 +1,356 @@
+"""The stochastic-updating models, both ordinary ``pm.Model`` objects.
+
+:func:`build_model`
+    The paper's scheme: uniform priors on the named parameters, a forward
+    model (surrogate, harmonic balance or PLL, chosen by one argument) and the
+    backbone-amplitude likelihood of the measured population. The posterior
+    describes the population of assemblies.
+:func:`hierarchical_model`
+    The principled alternative for population variability: one parameter
+    vector per measured curve, drawn from a population distribution, each
+    measured point Normal around its curve's harmonic-balance backbone;
+    sampled with NUTS through the differentiable harmonic-balance graph.
+    :func:`pm_joint.studies.population_coverage` checks its calibration on
+    synthetic campaigns.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import pymc as pm
+import pytensor.tensor as pt
+from numpy.typing import ArrayLike
+
+from identification.analytical.harmonic import backbone
+from identification.measurements.backbone import BackboneSet
+from identification.model import JointModel, parameter_bounds
+from pm_joint.distributions import (
+    BackboneAmplitude,
+    BackboneDensity,
+    amplitude_levels,
+    interpolate_backbone,
+)
+from pm_joint.forward import BACKBONE_COLUMNS, FORWARD_KINDS, forward_model, harmonic_backbone_graph
+from surrogates.runtime import SurrogateRuntime
+
+__all__ = [
+    "amplitudes_within_surrogate",
+    "build_model",
+    "hierarchical_model",
+    "uniform_priors",
+]
+
+#: Relative half-width of the default prior box around an analytical model's values.
+DEFAULT_RELATIVE_SPREAD = 0.5
+
+
+def uniform_priors(bounds: Mapping[str, tuple[float, float]]) -> pt.TensorVariable:
+    """One ``pm.Uniform`` per named parameter; returns them stacked as θ.
+
+    Call inside ``with pm.Model():``. The order of θ is the order of ``bounds``.
+    """
+    priors = []
+    for name, (low, high) in bounds.items():
+        if not (np.isfinite(low) and np.isfinite(high) and low < high):
+            raise ValueError(f"bounds of {name!r} must be finite with low < high, got {low, high}")
+        priors.append(pm.Uniform(name, lower=low, upper=high))
+    return pt.stack(priors)
+
+
+def build_model(
+    model: JointModel | None,
+    measured: BackboneSet,
+    *,
+    forward: str = "harmonic",
+    names: Sequence[str] | None = None,
+    bounds: Mapping[str, tuple[float, float]] | None = None,
+    surrogate: SurrogateRuntime | str | os.PathLike | None = None,
+    amplitudes_m: ArrayLike | None = None,
+    channels: Sequence[str] = ("frequency_hz",),
+    family: str = "copula",
+    density: BackboneDensity | None = None,
+    n_grid: int = 41,
+) -> pm.Model:
+    """The paper's updating model as a ``pm.Model``.
+
+    Parameters
+    ----------
+    model
+        Template joint model (not needed for the surrogate).
+    measured
+        Measured backbones.
+    forward
+        ``"surrogate"``, ``"harmonic"`` or ``"pll"``.
+    names
+        Parameters to update; default: the surrogate's, else all of the model's.
+    bounds
+        Uniform prior bounds; default: the surrogate's training box, else ±50 %
+        (:func:`~identification.model.parameter_bounds`).
+    surrogate
+        The surrogate runtime or its folder (for ``forward="surrogate"``).
+    amplitudes_m
+        Amplitude levels (m) of the likelihood; default a grid over the
+        measured curves' shared range (:func:`~pm_joint.distributions.amplitude_levels`).
+    channels, family
+        Passed to :meth:`BackboneDensity.fit <pm_joint.distributions.BackboneDensity.fit>`.
+    density
+        The likelihood's density, already fitted to ``measured`` (then its own
+        levels, channels and family are used and nothing is refitted); give it
+        or ``amplitudes_m``, not both.
+    n_grid
+        Number of amplitude (harmonic) or excitation (PLL) points of the
+        forward model's backbone.
+
+    Raises
+    ------
+    ValueError
+        For curves without a shared amplitude range, levels outside it, names
+        or bounds that do not match the surrogate (or lie outside its training
+        box), and a forward model whose prediction at the centre of the prior
+        box does not reach every level (NaN there). A prediction that fails
+        elsewhere in the box is not an error: it gets ``logp = -inf``, counted
+        (:class:`~pm_joint.distributions.NanCounter`), and the chain goes on.
+    """
+    if forward not in FORWARD_KINDS:
+        raise ValueError(f"forward must be one of {FORWARD_KINDS}, got {forward!r}")
+    if density is None:
+        levels = amplitude_levels(measured) if amplitudes_m is None else amplitudes_m
+        density = BackboneDensity.fit(measured, levels, channels=channels, family=family)
+    elif amplitudes_m is not None:
+        raise ValueError("give the likelihood's amplitudes_m or a fitted density, not both")
+    if forward == "surrogate":
+        runtime = surrogate if isinstance(surrogate, SurrogateRuntime) else None
+        if runtime is None:
+            if surrogate is None:
+                raise ValueError("forward model 'surrogate' needs surrogate= (a runtime or folder)")
+            runtime = SurrogateRuntime.load(surrogate)
+        names = list(names or runtime.parameter_names)
+        bounds = _surrogate_bounds(runtime, names, bounds)
+        op = forward_model("surrogate", model, names, surrogate=runtime)
+    else:
+        if model is None:
+            raise ValueError(f"forward model {forward!r} needs a JointModel")
+        names = list(names or model.parameter_names)
+        if bounds is None:
+            box = parameter_bounds(model, names, DEFAULT_RELATIVE_SPREAD)
+            bounds = {
+                n: (float(low), float(high)) for n, (low, high) in zip(names, box, strict=True)
+            }
+        low, high = measured.common_range()
+        # The levels themselves are grid points: the likelihood then sees the model's
+        # own values there, not a linear interpolation between grid points.
+        grid = np.union1d(np.linspace(0.5 * low, 1.2 * high, n_grid), density.amplitudes_m)
+        if forward == "harmonic":
+            op = forward_model("harmonic", model, names, amplitudes_m=grid)
+        else:
+            excitation_levels = _pll_excitation_levels(model, grid, n_grid)
+            op = forward_model("pll", model, names, levels=excitation_levels)
+    missing = [n for n in names if n not in bounds]
+    if missing:
+        raise ValueError(f"no prior bounds for {missing}")
+    bounds = {n: bounds[n] for n in names}
+    with pm.Model() as pm_model:
+        theta = uniform_priors(bounds)  # validates the bounds first
+        _check_reaches_levels(op, forward, bounds, density)
+        BackboneAmplitude("backbone", op(theta), observed=measured, density=density)
+    pm_model.forward_op = op  # kept for reports and posterior-predictive backbones
+    pm_model.backbone_density = density  # sample() keeps it with the draws
+    return pm_model
+
+
+def _surrogate_bounds(
+    runtime: SurrogateRuntime,
+    names: Sequence[str],
+    bounds: Mapping[str, tuple[float, float]] | None,
+) -> dict[str, tuple[float, float]]:
+    """Prior bounds for a surrogate: its training box, or given ones checked against it."""
+    expected = list(runtime.parameter_names)
+    if sorted(names) != sorted(expected):
+        raise ValueError(
+            f"the priors name {list(names)} but the surrogate {runtime.source} takes {expected}: "
+            f"missing {[n for n in expected if n not in names]}, "
+            f"unknown {[n for n in names if n not in expected]}"
+        )
+    box = {n: tuple(float(v) for v in b) for n, b in zip(expected, runtime.bounds, strict=True)}
+    if bounds is None:
+        return {n: box[n] for n in names}
+    unknown = [n for n in bounds if n not in box]
+    if unknown:
+        raise ValueError(f"prior bounds for {unknown}, which the surrogate does not take")
+    for name, (low, high) in bounds.items():
+        (box_low, box_high) = box[name]
+        if low < box_low or high > box_high:
+            raise ValueError(
+                f"prior bounds of {name!r} [{low:.6g}, {high:.6g}] leave the surrogate's training "
+                f"box [{box_low:.6g}, {box_high:.6g}]: it would extrapolate there"
+            )
+    return dict(bounds)
+
+
+def _check_reaches_levels(op, forward: str, bounds, density: BackboneDensity) -> None:
+    """The forward model at the centre of the prior box must predict every level."""
+    centre = np.array([0.5 * (low + high) for low, high in bounds.values()])
+    # FAST_COMPILE: one evaluation is not worth a numba compile.
+    backbone = op(pt.as_tensor(centre)).eval(mode="FAST_COMPILE")
+    values = interpolate_backbone(backbone, density.amplitudes_m, density.channels)
+    bad = np.isnan(values.eval(mode="FAST_COMPILE")).reshape(len(density.channels), -1)
+    if bad.any():
+        amplitude = backbone[:, 0][np.isfinite(backbone[:, 1])]
+        reach = (
+            f"{1e3 * amplitude.min():.4g}–{1e3 * amplitude.max():.4g} mm"
+            if amplitude.size
+            else "nothing (every point NaN)"
+        )
+        missed = density.amplitudes_m[bad.any(axis=0)]
+        raise ValueError(
+            f"the {forward} forward model at the centre of the prior box "
+            f"({dict(zip(bounds, centre.round(6).tolist(), strict=True))}) predicts {reach}, "
+            f"not the likelihood's levels {np.round(1e3 * missed, 4).tolist()} mm: "
+            "check its excitation levels or amplitude grid against the measured range"
+        )
+
+
+def _pll_excitation_levels(
+    model: JointModel, amplitudes_m: np.ndarray, n_levels: int
+) -> np.ndarray:
+    """``n_levels`` base accelerations (m/s²) whose harmonic-balance amplitudes span the grid."""
+    hb = backbone(model, amplitudes_m)
+    excitation = np.abs(hb.base_acceleration[hb.converged])
+    if excitation.size < 3:
+        raise ValueError("could not find PLL excitation levels: the model's backbone failed")
+    return np.geomspace(excitation.min(), excitation.max(), n_levels)
+
+
+def amplitudes_within_surrogate(measured: BackboneSet, runtime: SurrogateRuntime) -> np.ndarray:
+    """Likelihood levels (m) over the amplitudes both the measurements and the surrogate cover.
+
+    The surrogate's range is that of its prediction at the centre of its
+    training box; a model that cannot be held at the largest measured
+    amplitudes (its excitation would have to fall) is compared where it can.
+    As many levels as :func:`~pm_joint.distributions.amplitude_levels` gives.
+    """
+    centre = np.mean(np.asarray(runtime.bounds, dtype=float), axis=1)
+    amplitude = runtime.amplitude_m(centre)
+    low, high = measured.common_range()
+    low, high = max(low, float(np.min(amplitude))), min(high, float(np.max(amplitude)))
+    levels = amplitude_levels(measured)
+    inside = levels[(levels >= low) & (levels <= high)]
+    if inside.size < 3:
+        raise ValueError(
+            f"the surrogate covers {1e3 * np.min(amplitude):.3g}–{1e3 * np.max(amplitude):.3g} mm "
+            f"at the centre of its box: fewer than 3 likelihood levels of the measured range"
+        )
+    return np.linspace(inside[0], inside[-1], levels.size)
+
+
+def hierarchical_model(
+    model: JointModel,
+    measured: BackboneSet,
+    names: Sequence[str],
+    *,
+    amplitudes_m: ArrayLike | None = None,
+    population_scale: float = 0.2,
+    channels: Sequence[str] = ("frequency_hz",),
+    centred: bool = True,
+) -> pm.Model:
+    """Per-curve parameters from a population distribution, for NUTS.
+
+    Each named parameter of curve i is ``θ0 · exp(η_i)`` with θ0 the template's
+    value (so signs are kept and scales are O(1)) and ``η_i ~ Normal(μ, σ)``:
+    population log-location ``μ ~ Normal(0, 0.5)`` (``log_mean``) and spread
+    ``σ ~ HalfNormal(population_scale)`` (``log_spread``) per parameter. Each
+    measured value is Normal around the curve's harmonic-balance backbone at the
+    same amplitude, with one measurement error per channel (``{channel}_noise``,
+    half-normal with the spread of the measured values as its scale).
+
+    Parameters
+    ----------
+    model
+        Template model: the structure, and θ0 for the named parameters.
+    measured
+        Measured backbones, one per assembly.
+    names
+        Parameters that vary from assembly to assembly.
+    amplitudes_m
+        Amplitude levels (m) to interpolate every curve at; default (None)
+        every measured point as it is, which leaves out the interpolation error.
+    population_scale
+        Scale of the half-normal prior of the spreads (relative, log scale).
+    channels
+        ``("frequency_hz",)`` or with ``"damping_ratio"``.
+    centred
+        Centred parameters ``η_i`` (default) suit curves that pin their own
+        parameters, as backbones with many points do: the non-centred form
+        ``η_i = μ + σ z_i`` then couples ``z_i`` and ``σ`` into a funnel. Use
+        ``False`` for parameters the individual curves hardly inform.
+
+    Notes
+    -----
+    ``θ0·exp(μ_p)``, the population's geometric mean (its median), is the
+    deterministic ``{p}_population``; ``theta`` holds the per-curve values.
+    """
+    names = list(names)
+    template = model.parameters
+    unknown = [n for n in names if n not in template]
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {unknown}; the model has {list(template)}")
+    zero = [n for n in names if template[n] == 0]
+    if zero:
+        raise ValueError(f"parameters {zero} are 0 in the template: give them a value")
+    if not channels or any(c not in ("frequency_hz", "damping_ratio") for c in channels):
+        raise ValueError(f"channels must be 'frequency_hz' and/or 'damping_ratio', got {channels}")
+    curve, amplitude, values = _curve_points(measured, amplitudes_m)
+    # One amplitude grid for every curve; each point then picks its curve and amplitude.
+    grid, at = np.unique(amplitude, return_inverse=True)
+    theta0 = np.array([template[n] for n in names])
+    coords = {"curve": measured.labels, "parameter": names, "point": np.arange(amplitude.size)}
+    with pm.Model(coords=coords) as pm_model:
+        mu = pm.Normal("log_mean", 0.0, 0.5, dims="parameter")
+        sigma = pm.HalfNormal("log_spread", population_scale, dims="parameter")
+        if centred:
+            eta = pm.Normal("eta", mu, sigma, dims=("curve", "parameter"))
+        else:
+            z = pm.Normal("z", 0.0, 1.0, dims=("curve", "parameter"))
+            eta = mu + sigma * z
+        theta = pm.Deterministic("theta", theta0 * pt.exp(eta), dims=("curve", "parameter"))
+        for j, name in enumerate(names):
+            pm.Deterministic(f"{name}_population", theta0[j] * pt.exp(mu[j]))
+        backbone = harmonic_backbone_graph(model, theta, names, grid)
+        pm.Data("amplitude_m", amplitude, dims="point")
+        for channel in channels:
+            # Data, not constants: campaigns on the same points then share one compiled graph.
+            observed = pm.Data(f"{channel}_measured", values[channel], dims="point")
+            noise = pm.HalfNormal(f"{channel}_noise", observed.std())
+            predicted = backbone[curve, at, BACKBONE_COLUMNS.index(channel)]
+            pm.Normal(channel, predicted, noise, observed=observed, dims="point")
+    return pm_model
+
+
+def _curve_points(
+    measured: BackboneSet, amplitudes_m: ArrayLike | None
+) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """Curve index, amplitude (m) and channel values of every point, flat.
+
+    With ``amplitudes_m`` every curve is interpolated there (inside the range all
+    curves share); without, each curve's own points are taken.
+    """
+    if amplitudes_m is None:
+        amplitudes = [b.amplitude_m for b in measured]
+        frequency = np.concatenate([b.frequency_hz for b in measured])
+        damping = np.concatenate([b.damping_ratio for b in measured])
+    else:
+        levels = np.asarray(amplitudes_m, dtype=float)
+        low, high = measured.common_range()
+        if np.any((levels < low) | (levels > high)):
+            raise ValueError(
+                f"amplitude levels {levels} m must lie in the range all measured curves share "
+                f"({low:.4g}–{high:.4g} m)"
+            )
+        amplitudes = [levels] * len(measured)
+        frequency = measured.frequency_matrix(levels).ravel()
+        damping = measured.damping_matrix(levels).ravel()
+    curve = np.concatenate([np.full(a.size, i) for i, a in enumerate(amplitudes)])
+    return curve, np.concatenate(amplitudes), {"frequency_hz": frequency, "damping_ratio": damping}

@@ -1,0 +1,153 @@
+"""The posterior report folder: every figure of the paper's Figs. 19–22 and ``report.json``.
+
+:func:`report` computes with :mod:`pm_joint.analysis`, draws with
+:mod:`pm_joint.plotting` and writes both into one folder; it returns what it
+wrote, which the HTML page (:mod:`pm_joint.html`) is built from.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import warnings
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from identification.artifacts import atomic_write_text
+from identification.measurements.backbone import BackboneSet
+from pm_joint.analysis import (
+    correlation_matrix,
+    level_pdfs,
+    resolve_var_names,
+    sampler_info,
+    summarize,
+)
+from pm_joint.distributions import BackboneDensity
+from pm_joint.inference.storage import stored_density
+from pm_joint.plotting import (
+    plot_correlation,
+    plot_level_pdfs,
+    plot_pairs,
+    plot_predictive_backbones,
+    plot_trace_rank,
+    save_png,
+)
+
+__all__ = ["report"]
+
+
+def _jsonable(value: Any) -> Any:
+    """Plain JSON types; NaN and inf become null (strict JSON has no NaN)."""
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | np.ndarray):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        return float(value) if np.isfinite(value) else None
+    return value
+
+
+def _level_pdfs_record(result: Mapping[str, Mapping]) -> dict[str, Any]:
+    """:func:`level_pdfs` without the sample arrays, with their means and spreads."""
+    out = {}
+    for level, entry in result.items():
+        measured, sampled = entry["measured_hz"], entry["sampled_hz"]
+        out[level] = {
+            "index": entry["index"],
+            "amplitude_mm": entry["amplitude_mm"],
+            "n_measured": measured.size,
+            "n_sampled": sampled.size,
+            "n_dropped": entry["n_dropped"],
+            "measured_mean_hz": measured.mean(),
+            "measured_sd_hz": measured.std(ddof=1),
+            "sampled_mean_hz": sampled.mean(),
+            "sampled_sd_hz": sampled.std(ddof=1),
+            "mean_shift_hz": entry["mean_shift_hz"],
+            "measured_fit": entry["measured_fit"].to_dict(),
+            "sampled_fit": entry["sampled_fit"].to_dict(),
+            "distances": entry["distances"],
+        }
+    return out
+
+
+def report(
+    idata: xr.DataTree,
+    measured: BackboneSet,
+    *,
+    density: BackboneDensity | None = None,
+    var_names: Sequence[str] | None = None,
+    out: str | os.PathLike = "report/",
+    sampler: str | None = None,
+    name: str = "backbone",
+) -> dict[str, Any]:
+    """Write the report folder: every figure as PNG and ``report.json``.
+
+    Parameters
+    ----------
+    idata
+        The trace of :func:`pm_joint.sample` (or :func:`pm_joint.load_posterior`).
+    measured
+        The measured backbones the model was updated with.
+    density
+        The likelihood's density; default: the one stored with the posterior
+        (:func:`pm_joint.sample` keeps it for a :func:`pm_joint.build_model`
+        model, :func:`pm_joint.save_posterior` writes it), else (a posterior
+        written before densities were stored) one fitted to ``measured`` with
+        the defaults of :func:`pm_joint.build_model`, with a warning; either is
+        checked against the trace's observed data, so other levels raise rather
+        than mislead.
+    var_names
+        Parameters to report; default
+        :func:`~pm_joint.analysis.summaries.default_var_names`.
+    out
+        The report folder (created if missing).
+    sampler
+        Sampler name, where the trace does not tell (see
+        :func:`~pm_joint.analysis.summaries.sampler_info`).
+
+    Returns
+    -------
+    dict
+        The content of ``report.json``: ``var_names``, ``summary`` (records),
+        ``correlation`` (``variables``, ``matrix``), ``level_pdfs``, ``sampler``
+        and ``files`` (names in ``out``, ``report.json`` last).
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    names = resolve_var_names(idata, var_names)
+    density = density or stored_density(idata)
+    if density is None:
+        warnings.warn(
+            "no likelihood density is stored with this posterior (written before pm-joint "
+            "stored it, or not from build_model): refitting one at the default amplitude levels",
+            UserWarning,
+            stacklevel=2,
+        )
+        density = BackboneDensity.fit(measured)
+    pdfs = level_pdfs(idata, density, name=name)
+    corr = correlation_matrix(idata, names)
+    files = [*plot_pairs(idata, names, out), *plot_trace_rank(idata, names, out)]
+    files.append(save_png(plot_correlation(corr), out / "correlation.png"))
+    backbones = plot_predictive_backbones(idata, density, measured, name=name)
+    files.append(save_png(backbones, out / "predictive_backbones.png"))
+    files.append(save_png(plot_level_pdfs(pdfs), out / "level_pdfs.png"))
+    content = _jsonable(
+        {
+            "var_names": names,
+            "summary": summarize(idata, names).reset_index(names="variable").to_dict("records"),
+            "correlation": {"variables": list(corr.columns), "matrix": corr.values},
+            "level_pdfs": _level_pdfs_record(pdfs),
+            "sampler": sampler_info(idata, sampler),
+            "files": [p.name for p in files] + ["report.json"],
+        }
+    )
+    atomic_write_text(out / "report.json", json.dumps(content, indent=2, allow_nan=False))
+    return content
