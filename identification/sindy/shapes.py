@@ -195,7 +195,10 @@ def _novelty(correlation: np.ndarray) -> float:
     """1 − R² of the last column on the others, from the columns' correlation matrix."""
     if correlation.shape[0] == 1:
         return 1.0
-    return float(1.0 / np.linalg.inv(correlation)[-1, -1])
+    # Least squares, not an inverse: the other columns may be singular among themselves.
+    others, column = correlation[:-1, :-1], correlation[:-1, -1]
+    explained = float(column @ np.linalg.lstsq(others, column, rcond=None)[0])
+    return max(0.0, 1.0 - explained)
 
 
 def augmented_fold_grams(
