@@ -1,38 +1,26 @@
-"""Benchmark: samplers on one updating posterior (the paper's Metropolis against the rest).
+"""Benchmark: every sampler on the same updating posterior, one row per forward model.
 
 The posterior: a ``trc-like`` rig campaign of 25 assemblies (the rig's
-reassembly draws, PLL backbones at its 12 levels), the paper's likelihood
-(frequency at 9 amplitude levels, Gaussian copula of the fitted marginals) and
-uniform priors on every coefficient of the model structure, as the paper
-updates all of its model's: linear, viscous, cubic, and the microslip element's
-stiffness and slip force (the Jenkins coefficient is redundant with those two,
-:func:`identification.fitting.least_squares.default_free`). Boxes: ± 4 population spreads for the
-coefficients the rig varies, ± 10 % for the microslip stiffness. The frequency
-likelihood does not see viscous damping (as in the paper, flat directions come
-with it). A surrogate is trained here first on that box (harmonic-balance
-backbones on 41 excitation levels, amplitude and frequency: the paper's layout,
-with a smaller network than the paper's; sizes printed), its levels reaching
-0.03–3 mm on the nominal model so that the whole box covers the measured range.
+reassembly draws, PLL backbones at its 12 levels), the paper's population
+matching (frequency at 9 amplitude levels, Gaussian copula of the fitted
+marginals) and uniform priors on every coefficient of the model structure
+(:func:`identification.fitting.least_squares.default_free`). Boxes: ± 4
+population spreads for the coefficients the rig varies, ± 10 % for the
+microslip stiffness. The same posterior is sampled through two forward models:
 
-Runs, each a fresh :func:`pm_joint.sample` call with 2 chains on the
-2 cores, run lengths chosen so that fixed costs (compilation, process start)
-weigh alike:
+- ``surrogate``: a network trained here on that box (harmonic-balance backbones
+  on 41 excitation levels; its size, in weights and layers, is printed and in
+  the JSON), run by onnxruntime for the Metropolis samplers and rebuilt in
+  pytensor for the gradient samplers;
+- ``harmonic``: the native single-harmonic-balance graph.
 
-1. ``metropolis``: PyMC's Metropolis (one scalar coordinate at a time, all in
-   one step) with the ONNX surrogate Op, 30 000 draws (the paper: 30 000
-   samples in about 11 min);
-2. ``metropolis_pymc_default``: the same with PyMC's default blocking (one
-   Metropolis step, and one compiled logp, per variable);
-3. ``demetropolisz`` with the surrogate Op;
-4. ``nuts_harmonic``: NUTS through the native harmonic-balance graph;
-5. ``nuts_surrogate``: NUTS with the surrogate Op (its gradient backpropagates
-   through the network rebuilt in pytensor).
-
-Wall time is the whole call (compilation, process start, sampling); CPU time
-adds the chain processes; sampling time is PyMC's sampling loop alone. ESS is
-arviz's minimum bulk ESS over the parameters, per second of wall time. The
-machine is shared: the load average is printed, and CPU seconds show the cost
-when other work slows the wall clock.
+Samplers, each a fresh :func:`pm_joint.sample` call with 2 chains on the 2
+cores: ``metropolis`` (pm-joint's: PyMC's Metropolis, proposal covariance
+learned while tuning), ``metropolis_paper`` (the paper's coordinate-wise
+Metropolis, for the record), ``demetropolisz``, ``nuts`` (PyMC's) and
+``nutpie`` (numba backend). Wall time is the whole call (compilation, process
+start, sampling); min ESS is arviz's minimum bulk ESS over the parameters, per
+second of wall time. The machine is shared: the load average is printed.
 
 Run: ``.venv/bin/python bench/sampling.py``. Prints a table, then one JSON line.
 """
@@ -47,7 +35,6 @@ import tempfile
 import time
 import warnings
 
-import arviz as az
 import numpy as np
 import torch
 
@@ -55,7 +42,8 @@ from identification.analytical.pll import pll_backbones
 from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.rig import RIG_PRESETS, Rig
-from pm_joint.inference import build_model, sample
+from pm_joint.analysis import convergence_verdict
+from pm_joint.inference import SAMPLER_DEFAULTS, build_model, sample
 from surrogates import (
     NetConfig,
     SurrogateRuntime,
@@ -74,19 +62,15 @@ TRAINING_CURVES = 500  # the paper's 25 measured + 475 analytical
 #: enough that every parameter vector in the box reaches the measured range at both ends.
 AMPLITUDE_RANGE_M = (3e-5, 3e-3)
 NET = NetConfig(latent_dim=32, conv_filters=(32, 16), ffnn_width=128, ffnn_depth=3)
-METROPOLIS_DRAWS = 30_000
-METROPOLIS_TARGET_S = 120.0
-PAPER_METROPOLIS_S = 11 * 60.0
-ESS_RATIO_TARGET = 10.0
-RUNS = {  # name: (forward model, sampler, draws, tuning steps, step options)
-    "metropolis": ("surrogate", "metropolis", METROPOLIS_DRAWS, 2_000, {}),
-    "metropolis_pymc_default": (
-        "surrogate", "metropolis", METROPOLIS_DRAWS, 2_000, {"blocked": False},
-    ),
-    "demetropolisz": ("surrogate", "demetropolisz", 60_000, 5_000, {}),
-    "nuts_harmonic": ("harmonic", "nuts", 20_000, 1_000, {}),
-    "nuts_surrogate": ("surrogate", "nuts", 4_000, 1_000, {}),
+#: name: (sampler, draws, tuning steps, step options); the same runs on each forward model.
+RUNS = {
+    "metropolis": ("metropolis", 30_000, 5_000, {}),
+    "metropolis_paper": ("metropolis", 10_000, 2_000, {"adapt_covariance": False}),
+    "demetropolisz": ("demetropolisz", 30_000, 5_000, {}),
+    "nuts": ("nuts", 1_000, 1_000, {}),
+    "nutpie": ("nutpie", 1_000, 1_000, {}),
 }  # fmt: skip
+FORWARD_MODELS = ("surrogate", "harmonic")
 
 
 def campaign(rig: Rig) -> BackboneSet:
@@ -141,23 +125,22 @@ def run(pm_model, sampler: str, draws: int, tune: int, options: dict) -> dict:
         random_seed=1, progressbar=False, step_options=options,
     )  # fmt: skip
     wall, cpu = time.perf_counter() - start, cpu_seconds() - cpu
-    ess = az.ess(idata, var_names=NAMES, method="bulk")
-    rhat = az.rhat(idata, var_names=NAMES)
-    stats = idata.sample_stats
+    verdict = convergence_verdict(idata, NAMES)
     figures = {
+        "sampler": sampler,
         "draws": draws,
+        "tune": tune,
         "wall_s": wall,
         "cpu_s": cpu,
-        "sampling_s": float(idata.posterior.attrs["sampling_time"]),
-        "ess_bulk_min": float(min(ess[n] for n in NAMES)),
-        "r_hat_max": float(max(rhat[n] for n in NAMES)),
+        "ess_bulk_min": min(p["ess_bulk"] for p in verdict.parameters),
+        "ess_tail_min": min(p["ess_tail"] for p in verdict.parameters),
+        "r_hat_max": max(p["r_hat"] for p in verdict.parameters),
+        "converged": verdict.converged,
+        "divergences": verdict.divergences,
+        "nan_rate": verdict.nan_rate,
         "means": {n: float(idata.posterior[n].mean()) for n in NAMES},
     }
-    figures["ess_per_s"] = figures["ess_bulk_min"] / wall
-    if "diverging" in stats:
-        figures["divergences"] = int(stats["diverging"].sum())
-    if "accepted" in stats:
-        figures["acceptance"] = float(stats["accepted"].mean())
+    figures["ess_bulk_per_s"] = figures["ess_bulk_min"] / wall
     return figures
 
 
@@ -172,72 +155,78 @@ def main() -> None:
         for n, s in spreads.items()
     }
     measured = campaign(rig)
+    only = os.environ.get("BENCH_SAMPLERS")  # e.g. "metropolis,nutpie" for a partial rerun
+    runs = {k: v for k, v in RUNS.items() if not only or k in only.split(",")}
+    results: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as folder:
         runtime, surrogate = train(rig, bounds, folder)
         kwargs = {"names": NAMES, "bounds": bounds, "surrogate": runtime}
-        models = {
-            forward: build_model(rig.model, measured, forward=forward, **kwargs)
-            for forward in ("surrogate", "harmonic")
-        }
-        results = {}
-        for name, (forward, sampler, draws, tune, options) in RUNS.items():
-            results[name] = run(models[forward], sampler, draws, tune, options)
-            print(f"{name}: {results[name]['wall_s']:.1f} s", flush=True)
+        for forward in FORWARD_MODELS:
+            pm_model = build_model(rig.model, measured, forward=forward, **kwargs)
+            results[forward] = {}
+            for name, (sampler, draws, tune, options) in runs.items():
+                results[forward][name] = run(pm_model, sampler, draws, tune, options)
+                print(f"{forward} {name}: {results[forward][name]['wall_s']:.1f} s", flush=True)
     report(results, surrogate)
 
 
 def report(results: dict, surrogate: dict) -> None:
-    """The table, the verdicts, and the JSON line."""
-    for figures in results.values():
-        for reference in ("metropolis", "metropolis_pymc_default"):
-            ratio = figures["ess_per_s"] / results[reference]["ess_per_s"]
-            figures[f"ess_per_s_vs_{reference}"] = ratio
-    best = max(results, key=lambda n: results[n]["ess_per_s"])
+    """The table per forward model, the verdicts, and the JSON line."""
     load = os.getloadavg()[0]
     print(
         f"\nposterior: {ASSEMBLIES} trc-like backbones, {len(NAMES)} parameters {NAMES}; "
-        f"surrogate {surrogate['surrogate_weights']} weights ({surrogate['surrogate_curves']} "
-        f"curves × {surrogate['surrogate_levels']} levels, trained in "
-        f"{surrogate['surrogate_train_s']:.0f} s, frequency max error "
-        f"{surrogate['surrogate_frequency_max_ape_pct']:.3f} %)"
+        f"surrogate {surrogate['surrogate_weights']} weights ({NET.to_dict()}; "
+        f"{surrogate['surrogate_curves']} curves × {surrogate['surrogate_levels']} levels, "
+        f"frequency max error {surrogate['surrogate_frequency_max_ape_pct']:.3f} %)"
     )
-    print(
-        f"{'run':<25s}{'draws':>8s}{'wall s':>8s}{'CPU s':>8s}{'loop s':>8s}{'min ESS':>9s}"
-        f"{'ESS/s':>8s}{'×Metro':>8s}{'×default':>9s}{'r_hat':>7s}{'div':>5s}"
-    )
-    for name, f in results.items():
-        print(
-            f"{name:<25s}{f['draws']:>8d}{f['wall_s']:>8.1f}{f['cpu_s']:>8.1f}"
-            f"{f['sampling_s']:>8.1f}{f['ess_bulk_min']:>9.0f}{f['ess_per_s']:>8.1f}"
-            f"{f['ess_per_s_vs_metropolis']:>8.1f}{f['ess_per_s_vs_metropolis_pymc_default']:>9.1f}"
-            f"{f['r_hat_max']:>7.3f}{f.get('divergences', ''):>5}"
-        )
+    summary = {}
+    for forward, rows in results.items():
+        print(f"\nforward model: {forward}")
+        print(f"{'sampler':<18s}{'draws':>8s}{'wall s':>8s}{'CPU s':>8s}{'min ESS':>9s}"
+              f"{'ESS/s':>8s}{'r_hat':>8s}{'div':>5s}  verdict")  # fmt: skip
+        for name, f in rows.items():
+            print(
+                f"{name:<18s}{f['draws']:>8d}{f['wall_s']:>8.1f}{f['cpu_s']:>8.1f}"
+                f"{f['ess_bulk_min']:>9.0f}{f['ess_bulk_per_s']:>8.2f}{f['r_hat_max']:>8.3f}"
+                f"{f['divergences'] if f['divergences'] is not None else '':>5}  "
+                f"{'converged' if f['converged'] else 'NOT CONVERGED'}"
+            )
+        best = max(rows, key=lambda n: rows[n]["ess_bulk_per_s"])
+        summary[forward] = {"best_sampler": best}
+        if "nutpie" in rows:
+            for f in rows.values():
+                f["ess_per_s_vs_nutpie"] = f["ess_bulk_per_s"] / rows["nutpie"]["ess_bulk_per_s"]
+    default = SAMPLER_DEFAULTS["matching", "harmonic"]["sampler"]
+    harmonic = results.get("harmonic", {})
+    if "nutpie" in harmonic and default in harmonic:
+        ratio = harmonic[default]["ess_per_s_vs_nutpie"]
+        summary["harmonic"]["default_vs_nutpie"] = ratio
+        print(f"\nharmonic balance: pm-joint's default ({default}) at {ratio:.2f}× nutpie's "
+              "min-ESS/s (target ≥ 1.0×)")  # fmt: skip
     print(f"load average (1 min): {load:.2f} on {os.cpu_count()} cores (shared machine)")
-    metropolis_s = results["metropolis"]["wall_s"]
-    print(
-        f"Metropolis {METROPOLIS_DRAWS} draws: {metropolis_s:.1f} s "
-        f"(target ≤ {METROPOLIS_TARGET_S:.0f} s; paper about {PAPER_METROPOLIS_S:.0f} s); "
-        f"best sampler {best}: {results[best]['ess_per_s_vs_metropolis_pymc_default']:.1f}× "
-        f"the ESS/s of PyMC's default Metropolis, "
-        f"{results[best]['ess_per_s_vs_metropolis']:.1f}× ours (target ≥ {ESS_RATIO_TARGET:.0f}×)"
-    )
+    # Flat figures for the README's table (bench/run_all.py).
+    flat = {}
+    for forward, rows in results.items():
+        for name, f in rows.items():
+            flat[f"{forward}_{name}_ess_per_s"] = f["ess_bulk_per_s"]
+        if {"metropolis", "metropolis_paper"} <= set(rows):
+            flat[f"{forward}_metropolis_vs_paper"] = (
+                rows["metropolis"]["ess_bulk_per_s"] / rows["metropolis_paper"]["ess_bulk_per_s"]
+            )
+    if "default_vs_nutpie" in summary.get("harmonic", {}):
+        flat["harmonic_default_vs_nutpie"] = summary["harmonic"]["default_vs_nutpie"]
     print(
         json.dumps(
             {
                 **surrogate,
+                **flat,
                 "parameters": NAMES,
                 "assemblies": ASSEMBLIES,
                 "chains": 2,
-                "runs": results,
-                "metropolis_30000_s": metropolis_s,
-                "metropolis_30000_target_s": METROPOLIS_TARGET_S,
-                "metropolis_30000_paper_s": PAPER_METROPOLIS_S,
-                "best_sampler": best,
-                "best_ess_per_s_vs_metropolis_pymc_default": results[best][
-                    "ess_per_s_vs_metropolis_pymc_default"
-                ],
-                "best_ess_per_s_vs_metropolis": results[best]["ess_per_s_vs_metropolis"],
-                "ess_per_s_ratio_target": ESS_RATIO_TARGET,
+                "forward_models": results,
+                "summary": summary,
+                "default_sampler": default,
+                "default_vs_nutpie_target": 1.0,
                 "load_average_1min": load,
                 "cpu_count": os.cpu_count(),
             }

@@ -33,7 +33,7 @@ import matplotlib.pyplot as plt
 
 from identification.criticism.plots import plot_comparison, plot_history
 from identification.rig import RIG_PRESETS
-from pm_joint.studies import hidden_effect_study
+from pm_joint.studies import criticism_study
 
 SMALL = os.environ.get("PM_JOINT_SIZE") == "small"
 OUT = os.environ.get("PM_JOINT_OUT", "case_study_output")
@@ -59,7 +59,7 @@ for name in SCENARIOS:
 # %%
 results = {}
 for name in SCENARIOS:
-    result = hidden_effect_study(name, seed=0, assemblies=3, levels=6 if SMALL else 8)
+    result = criticism_study(name, seed=0, assemblies=3, levels=6 if SMALL else 8)
     results[name] = result
     for k, crit in enumerate(result.criticisms):
         print(f"--- {name}, round {k}: {crit.model.equation()}")

@@ -2,11 +2,18 @@
 
 The equation of motion, with x the displacement relative to the base::
 
-    ẍ + Σ_i c_i φ_i(x, ẋ) = −a_base(t)
+    ẍ + Σ_i c_i φ_i(x, ẋ) = −a_base(t)     (base excitation)
+    ẍ + Σ_i c_i φ_i(x, ẋ) = g·F(t)         (force excitation)
 
 where each φ_i is a catalogue effect (:mod:`identification.effects`) and the
 hysteretic ``microslip`` term, when present, is a Jenkins element whose force
-is scaled by its coefficient.
+is scaled by its coefficient. ``g`` is the **modal forcing gain** (1/kg: the
+mode's participation at the driving point over its modal mass), the model's
+parameter ``forcing_gain``: it links force-driven tests to base-driven ones
+and free decays. Backbones (frequency and power-balance damping at each
+amplitude) do not depend on it once a force-driven test's damping is in modal
+units (:mod:`identification.measurements.forcing`), so it is not among the
+:attr:`JointModel.parameter_names` that fits and updating move.
 """
 
 from __future__ import annotations
@@ -73,6 +80,8 @@ class JointModel:
         or an iterable of :class:`Term`.
     name
         Free-text label kept in JSON files and reports.
+    forcing_gain
+        Modal forcing gain ``g`` (1/kg) of force excitation, when known.
 
     Examples
     --------
@@ -81,7 +90,12 @@ class JointModel:
     100.0
     """
 
-    def __init__(self, terms: Mapping[str, Any] | Iterable[Term], name: str = "") -> None:
+    def __init__(
+        self,
+        terms: Mapping[str, Any] | Iterable[Term],
+        name: str = "",
+        forcing_gain: float | None = None,
+    ) -> None:
         if isinstance(terms, Mapping):
             terms = [_term_from_entry(k, v) for k, v in terms.items()]
         terms = tuple(terms)
@@ -93,6 +107,11 @@ class JointModel:
         # Catalogue order keeps equations, parameter vectors and JSON stable.
         self.terms: tuple[Term, ...] = tuple(sorted(terms, key=lambda t: CATALOGUE[t.effect].index))
         self.name = name
+        if forcing_gain is not None:
+            forcing_gain = float(forcing_gain)
+            if not (math.isfinite(forcing_gain) and forcing_gain > 0):
+                raise ValueError(f"forcing_gain must be finite and > 0 (1/kg), got {forcing_gain}")
+        self.forcing_gain = forcing_gain
 
     # ------------------------------------------------------------------ access
     @property
@@ -139,12 +158,12 @@ class JointModel:
         """A copy with ``effect`` added; ValueError if it is already present."""
         if effect in self:
             raise ValueError(f"effect {effect!r} is already in the model")
-        return JointModel([*self.terms, Term(effect, coefficient, shape)], name=self.name)
+        return self._like([*self.terms, Term(effect, coefficient, shape)])
 
     def without(self, effect: str) -> JointModel:
         """A copy with ``effect`` removed."""
         self[effect]
-        return JointModel([t for t in self.terms if t.effect != effect], name=self.name)
+        return self._like([t for t in self.terms if t.effect != effect])
 
     def replace(self, **coefficients: float) -> JointModel:
         """A copy with new coefficients or shape values, by parameter name.
@@ -166,7 +185,15 @@ class JointModel:
         for t in self.terms:
             shape = {n: values.get(f"{t.effect}.{n}", v) for n, v in t.shape.items()}
             terms.append(Term(t.effect, values.get(t.effect, t.coefficient), shape))
-        return JointModel(terms, name=self.name)
+        return self._like(terms)
+
+    def _like(self, terms: Iterable[Term]) -> JointModel:
+        """A model of these terms with this one's name and forcing gain."""
+        return JointModel(terms, name=self.name, forcing_gain=self.forcing_gain)
+
+    def with_forcing_gain(self, forcing_gain: float | None) -> JointModel:
+        """A copy with the modal forcing gain ``g`` (1/kg) of force excitation."""
+        return JointModel(self.terms, name=self.name, forcing_gain=forcing_gain)
 
     # ------------------------------------------------------- parameter vector
     @property
@@ -251,17 +278,24 @@ class JointModel:
         for t in self.terms:
             sign = "−" if t.coefficient < 0 else "+"
             text += f" {sign} {t.text(precision)}"
-        return text + " = −a_base(t)"
+        if self.forcing_gain is None:
+            return text + " = −a_base(t)"
+        return text + f" = −a_base(t) or g·F(t), g = {self.forcing_gain:.{precision}g} 1/kg"
 
     def __repr__(self) -> str:
         label = f" {self.name!r}" if self.name else ""
         return f"<JointModel{label}: {self.equation()}>"
 
     def __eq__(self, other: object) -> bool:
-        return isinstance(other, JointModel) and self.terms == other.terms
+        return (
+            isinstance(other, JointModel)
+            and self.terms == other.terms
+            and self.forcing_gain == other.forcing_gain
+        )
 
     def __hash__(self) -> int:
-        return hash(tuple((t.effect, t.coefficient, tuple(t.shape.items())) for t in self.terms))
+        terms = tuple((t.effect, t.coefficient, tuple(t.shape.items())) for t in self.terms)
+        return hash((terms, self.forcing_gain))
 
     # -------------------------------------------------------------------- JSON
     def _terms_json(self) -> list[dict[str, Any]]:
@@ -272,8 +306,11 @@ class JointModel:
 
     @property
     def content_sha256(self) -> str:
-        """SHA-256 of the canonical JSON of the terms (effects, coefficients, shapes)."""
-        return sha256_json(self._terms_json())
+        """SHA-256 of the canonical JSON of the terms (effects, coefficients, shapes), and of
+        the forcing gain where the model has one."""
+        if self.forcing_gain is None:
+            return sha256_json(self._terms_json())
+        return sha256_json({"terms": self._terms_json(), "forcing_gain": self.forcing_gain})
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready description (see :meth:`from_dict`), with :attr:`content_sha256`."""
@@ -283,6 +320,7 @@ class JointModel:
             "name": self.name,
             "equation": self.equation(),
             "terms": self._terms_json(),
+            **({} if self.forcing_gain is None else {"forcing_gain": self.forcing_gain}),
             "content_sha256": self.content_sha256,
         }
 
@@ -324,7 +362,12 @@ class JointModel:
                 terms.append(Term(entry["effect"], coefficient, dict(shape)))
             except (TypeError, ValueError) as exc:
                 raise ValueError(f"{where} ({entry.get('effect')!r}): {exc}") from None
-        model = cls(terms, name=str(data.get("name", "")))
+        gain = data.get("forcing_gain")
+        try:
+            model = cls(terms, name=str(data.get("name", "")),
+                        forcing_gain=None if gain is None else float(gain))  # fmt: skip
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{source}: {exc}") from None
         if "content_sha256" in data:
             check_sha256(
                 data["content_sha256"],

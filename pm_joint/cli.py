@@ -1,20 +1,37 @@
 """The ``pm-joint`` command.
 
 Each subcommand is a thin wrapper over one function of :mod:`pm_joint.pipeline`;
-bad input ends in a one-line reason on stderr and exit code 2.
+bad input ends in a one-line reason on stderr and exit code 2, and every
+warning is one line naming what it is about.
+
+``backbones``, ``identify``, ``criticize`` and ``update`` read records alike: a
+folder or a file in the TRC layout, or in a column layout (CSV/TSV with a
+header, MAT, HDF5), with the test type and, for column files, the columns'
+roles given by the record options (:func:`add_record_options`), e.g.
+``pm-joint backbones ring.csv --test free-decay --response displacement
+--quantity displacement``.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 from identification.effects import CATALOGUE
+from identification.measurements.quantities import EXCITATION_KINDS, QUANTITIES, TEST_TYPES
+from identification.measurements.signals import DECAY_EDGE_PERIODS
 from identification.model import PRESETS, JointModel
 from identification.rig import RIG_PRESETS
+from identification.sindy import PAPER_LIBRARY
+
+# Names only: the samplers and population models are known without importing PyMC.
+SAMPLERS = ("metropolis", "demetropolisz", "nuts", "nutpie")
+POPULATION_MODELS = ("matching", "hierarchical")
 
 
 def _effect_list(text: str) -> list[str]:
@@ -25,6 +42,107 @@ def _effect_list(text: str) -> list[str]:
                 f"unknown effect {name!r}; the catalogue has: {', '.join(CATALOGUE)}"
             )
     return names
+
+
+@contextlib.contextmanager
+def _executor(args: argparse.Namespace) -> Iterator[Any]:
+    """A dask Client on ``--scheduler`` or on a ``--workers`` LocalCluster; None: serial."""
+    if args.scheduler is None and (args.workers or 1) < 2:
+        yield None
+        return
+    from dask.distributed import Client, LocalCluster
+
+    if args.scheduler is not None:
+        with Client(args.scheduler) as client:
+            yield client
+        return
+    with (
+        LocalCluster(
+            n_workers=args.workers, threads_per_worker=1, dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        yield client
+
+
+def _add_executor_options(p: argparse.ArgumentParser, workers_help: str) -> None:
+    p.add_argument("--workers", type=int, help=workers_help)
+    p.add_argument(
+        "--scheduler", metavar="ADDRESS",
+        help="address of a running dask scheduler (e.g. tcp://host:8786) to compute on",
+    )  # fmt: skip
+
+
+def _band(text: str) -> tuple[float, float]:
+    try:
+        low, high = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--band needs LOW,HIGH in Hz, got {text!r}") from None
+    if not 0 < low < high:
+        raise argparse.ArgumentTypeError(f"--band needs 0 < LOW < HIGH, got {text!r}")
+    return low, high
+
+
+def add_record_options(parser: argparse.ArgumentParser) -> None:
+    """The options that say how records read (the same on every command that reads them)."""
+    group = parser.add_argument_group("records (TRC folders take --test; column files all)")
+    group.add_argument("--test", choices=TEST_TYPES, default="phase-resonance",
+                       help="test type (default phase-resonance: PLL holds)")  # fmt: skip
+    group.add_argument("--time", metavar="NAME", help="time column (default: time or t)")
+    group.add_argument("--response", metavar="NAME", help="response column")
+    group.add_argument("--quantity", choices=QUANTITIES,
+                       help="what the response is (default: from its name)")  # fmt: skip
+    group.add_argument("--relative-response", action="store_true",
+                       help="the response is relative to the base (default: absolute)")  # fmt: skip
+    group.add_argument("--excitation", metavar="NAME", help="excitation column")
+    group.add_argument("--excitation-kind", choices=EXCITATION_KINDS,
+                       help="what the excitation is (default: from its name)")  # fmt: skip
+    group.add_argument("--excitation-gain", type=float, default=1.0, metavar="GAIN",
+                       help="SI units of the excitation per unit of its column, e.g. N/V "
+                       "for a force read as a voltage (default 1)")  # fmt: skip
+    group.add_argument("--forcing-gain", type=float, metavar="G",
+                       help="modal forcing gain of a force-driven test (1/kg; default: "
+                       "measured from the record's decay)")  # fmt: skip
+    group.add_argument("--frequency", metavar="NAME",
+                       help="controller frequency column (Hz; default: frequency…)")  # fmt: skip
+    group.add_argument("--level", metavar="NAME",
+                       help="commanded level column: its runs of one value are the holds "
+                       "(default: level…)")  # fmt: skip
+    group.add_argument("--decimal-comma", action="store_true",
+                       help="text files write 0,5 for 0.5 (else detected)")  # fmt: skip
+    group.add_argument("--edge-periods", type=float, metavar="N",
+                       help="periods left out at the ends of a record for identification "
+                       f"(default 20, {DECAY_EDGE_PERIODS:g} for a free decay) and at the start "
+                       "of a decay for its backbone (default 0)")  # fmt: skip
+    group.add_argument("--window-periods", type=float, default=6.0, metavar="N",
+                       help="periods per window of a decay's backbone (default 6)")  # fmt: skip
+    group.add_argument("--band", type=_band, metavar="LOW,HIGH",
+                       help="pass band of the identification and where a decay's mode is "
+                       "looked for (Hz; default: frequency channel or spectrum)")  # fmt: skip
+
+
+def _workspace_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The Workspace keywords of the record options."""
+    from identification.measurements.columns import ColumnLayout
+
+    layout = ColumnLayout(
+        test=args.test, time=args.time, response=args.response, quantity=args.quantity,
+        excitation=args.excitation, excitation_kind=args.excitation_kind,
+        excitation_gain=args.excitation_gain, frequency=args.frequency, level=args.level,
+        decimal_comma=True if args.decimal_comma else None, relative=args.relative_response,
+        forcing_gain=args.forcing_gain,
+    )  # fmt: skip
+    decay = {"window_periods": args.window_periods, "edge_periods": args.edge_periods or 0.0,
+             "band_hz": args.band}  # fmt: skip
+    return {"layout": layout, "decay_options": decay}
+
+
+def _identify_options(args: argparse.Namespace) -> dict[str, Any]:
+    """Preprocessing options of the identification from the record options."""
+    edge = args.edge_periods
+    if edge is None:
+        edge = DECAY_EDGE_PERIODS if args.test == "free-decay" else 20.0
+    return {"edge_periods": edge, "band_hz": args.band}
 
 
 def _cmd_effects(args: argparse.Namespace) -> None:
@@ -47,28 +165,39 @@ def _cmd_model(args: argparse.Namespace) -> None:
 def _cmd_rig(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import write_rig_campaign
 
-    campaign = write_rig_campaign(
-        args.preset, args.out, assemblies=args.assemblies, runs=args.runs, seed=args.seed,
-        n_levels=args.levels, workers=args.workers,
-    )  # fmt: skip
-    print(f"wrote {len(campaign)} record(s) of rig preset {args.preset!r} to {args.out}")
+    with contextlib.ExitStack() as stack:
+        # --workers alone keeps its process pool; --scheduler sends the records to dask.
+        client = stack.enter_context(_executor(args)) if args.scheduler else None
+        campaign = write_rig_campaign(
+            args.preset, args.out, assemblies=args.assemblies, runs=args.runs, seed=args.seed,
+            n_levels=args.levels, workers=args.workers, executor=client,
+            force_driven=args.force_driven, quantity=args.quantity,
+        )  # fmt: skip
+    layout = "column layout, force-driven" if args.force_driven else "TRC layout"
+    print(f"wrote {len(campaign)} record(s) of rig preset {args.preset!r} to {args.out} ({layout})")
 
 
 def _cmd_backbones(args: argparse.Namespace) -> None:
+    from identification.measurements.extraction import extraction_summary
     from pm_joint.pipeline import campaign_backbones
     from pm_joint.workspace import Workspace
 
-    workspace = Workspace(args.dir, backbones_csv=args.out, n_periods=args.periods)
+    workspace = Workspace(args.dir, backbones_csv=args.out, n_periods=args.periods,
+                          **_workspace_options(args))  # fmt: skip
     backbones = campaign_backbones(workspace)
-    print(f"extracted {len(backbones)} backbone(s) to {workspace.backbones_csv}")
+    points = sum(len(b) for b in backbones)
+    print(f"extracted {len(backbones)} backbone(s), {points} points ({args.test}) to "
+          f"{workspace.backbones_csv}")  # fmt: skip
+    print(extraction_summary(backbones))
 
 
 def _cmd_identify(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import identify_campaign
     from pm_joint.workspace import Workspace
 
-    workspace = Workspace(args.dir)
-    result = identify_campaign(workspace, args.effects, n_records=args.records, out=args.out)
+    workspace = Workspace(args.dir, **_workspace_options(args))
+    result = identify_campaign(workspace, args.effects, n_records=args.records, out=args.out,
+                               **_identify_options(args))  # fmt: skip
     print(result.summary())
     print(result.model.equation())
     print(f"wrote {args.out}")
@@ -79,39 +208,65 @@ def _cmd_train_surrogate(args: argparse.Namespace) -> None:
     from pm_joint.workspace import Workspace
 
     workspace = Workspace(args.dir, model=args.model)
-    runtime = train_surrogate_stage(
-        workspace, args.out, labels=label_records(workspace), n_curves=args.curves,
-        max_epochs=args.epochs, seed=args.seed,
-    )  # fmt: skip
+    with _executor(args) as executor:
+        runtime = train_surrogate_stage(
+            workspace, args.out, labels=label_records(workspace), n_curves=args.curves,
+            max_epochs=args.epochs, seed=args.seed, executor=executor,
+        )  # fmt: skip
     print(f"wrote {args.out}/surrogate.onnx for parameters {', '.join(runtime.parameter_names)}")
 
 
 def _cmd_criticize(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import criticize_campaign
+    from pm_joint.workspace import Workspace
 
-    crit = criticize_campaign(args.dir, args.model, args.out, rounds=args.rounds)
-    print(crit.summary())
+    workspace = Workspace(args.dir, **_workspace_options(args))
+    crit = criticize_campaign(workspace, args.model, args.out, rounds=args.rounds)
+    rounds = crit.rounds
+    for k, report in enumerate(rounds, start=1):
+        if len(rounds) > 1:
+            print(f"--- round {k} of {len(rounds)} ({report['action']}): {report['verdict']}")
+        print(report["summary"])
     print(f"wrote {args.out}/criticism.json")
 
 
-def _cmd_update(args: argparse.Namespace) -> None:
+#: Exit code of `pm-joint update` when the posterior is written but did not converge.
+EXIT_NOT_CONVERGED = 3
+
+
+def _cmd_update(args: argparse.Namespace) -> int:
+    from pm_joint.analysis import convergence_verdict
     from pm_joint.pipeline import posterior_report, update_backbones
     from pm_joint.workspace import Workspace
 
-    if args.forward == "surrogate" and not args.surrogate:
+    forward = args.forward or ("harmonic" if args.population == "hierarchical" else "surrogate")
+    if forward == "surrogate" and not args.surrogate:
         raise ValueError("--forward surrogate needs --surrogate SURROGATE_DIR")
-    if args.forward != "surrogate" and not args.model:
-        raise ValueError(f"--forward {args.forward} needs --model model.json")
-    workspace = Workspace(args.dir, model=args.model, surrogate=args.surrogate)
-    update_backbones(
-        workspace, args.out, forward=args.forward, sampler=args.sampler, draws=args.draws,
-        tune=args.tune, chains=args.chains, seed=args.seed,
-        trace=args.trace or Path(args.out).with_suffix(".zarr"), resume=args.resume,
+    if forward != "surrogate" and not args.model:
+        raise ValueError(f"--forward {forward} needs --model model.json")
+    workspace = Workspace(args.dir, model=args.model, surrogate=args.surrogate,
+                          **_workspace_options(args))  # fmt: skip
+    idata = update_backbones(
+        workspace, args.out, population=args.population, forward=forward,
+        sampler=args.sampler, draws=args.draws, tune=args.tune, chains=args.chains,
+        seed=args.seed, trace=args.trace or Path(args.out).with_suffix(".zarr"),
+        resume=args.resume,
     )  # fmt: skip
     print(f"wrote {args.out}")
     if args.report:
         posterior_report(workspace, args.report)
         print(f"wrote {args.report}/report.json")
+    verdict = convergence_verdict(idata)
+    print(f"convergence: {verdict.headline()}")
+    if not verdict.converged:
+        print(
+            f"pm-joint update: NOT CONVERGED: the posterior in {args.out} is not a result yet; "
+            "continue it with --resume and more --draws (exit code "
+            f"{EXIT_NOT_CONVERGED})",
+            file=sys.stderr,
+        )
+        return EXIT_NOT_CONVERGED
+    return 0
 
 
 def _cmd_report(args: argparse.Namespace) -> None:
@@ -123,10 +278,19 @@ def _cmd_report(args: argparse.Namespace) -> None:
     print(f"wrote {index}")
 
 
-def _cmd_demo(args: argparse.Namespace) -> None:
+def _cmd_demo(args: argparse.Namespace) -> int:
     from pm_joint.demo import run_demo
 
-    run_demo(out=args.out, size=args.size)
+    result = run_demo(out=args.out, size=args.size)
+    if not result.converged:
+        lines = "\n".join(f"  {line}" for line in result.not_converged())
+        print(
+            f"pm-joint demo: NOT CONVERGED: the report in {args.out} holds posteriors that are "
+            f"not a result yet (exit code {EXIT_NOT_CONVERGED}):\n{lines}",
+            file=sys.stderr,
+        )
+        return EXIT_NOT_CONVERGED
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -153,22 +317,34 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--runs", type=int, default=1, help="runs per assembly (default 1)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--levels", type=int, default=10, help="excitation levels (default 10)")
-    p.add_argument("--workers", type=int, help="processes writing records (default: one per CPU)")
+    _add_executor_options(p, "processes writing records (default: one per CPU)")
+    p.add_argument(
+        "--force-driven", action="store_true",
+        help="drive the structure by a measured force and end each record in a ring-down; "
+        "written in the column layout (HDF5)",
+    )  # fmt: skip
+    p.add_argument("--quantity", choices=QUANTITIES, default="velocity",
+                   help="response of a force-driven record (default velocity)")  # fmt: skip
     p.set_defaults(func=_cmd_rig)
 
+    records = "campaign folder or record file (TRC or column layout)"
     p = sub.add_parser("backbones", help="extract backbones from every record of a campaign")
-    p.add_argument("dir", help="campaign folder (TRC layout)")
-    p.add_argument("--out", help="CSV file (default DIR/backbones.csv)")
+    p.add_argument("dir", help=records)
+    p.add_argument("--out", help="CSV file (default DIR/backbones.csv, FILE_backbones.csv)")
     p.add_argument("--periods", type=int, default=70, help="periods per hold (default 70)")
+    add_record_options(p)
     p.set_defaults(func=_cmd_backbones)
 
     p = sub.add_parser("identify", help="SINDy identification of a joint model")
-    p.add_argument("dir", help="campaign folder (TRC layout)")
+    p.add_argument("dir", help=records)
     p.add_argument(
-        "--effects", type=_effect_list, required=True, help="library: comma-separated effect names"
-    )
+        "--effects", type=_effect_list, default=list(PAPER_LIBRARY),
+        help="library: comma-separated effect names (default: the paper's library, every "
+        "catalogue effect but microslip)",
+    )  # fmt: skip
     p.add_argument("--out", required=True, help="model JSON file")
     p.add_argument("--records", type=int, default=3, help="records fitted jointly (default 3)")
+    add_record_options(p)
     p.set_defaults(func=_cmd_identify)
 
     p = sub.add_parser("train-surrogate", help="dataset, training and ONNX export of a surrogate")
@@ -178,28 +354,52 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--curves", type=int, default=500, help="training curves (default 500)")
     p.add_argument("--epochs", type=int, help="epochs per stage (default: the paper-sized run)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    _add_executor_options(
+        p, "dask LocalCluster workers computing the dataset (default: serial; the dataset "
+        "does not depend on it)",
+    )  # fmt: skip
     p.set_defaults(func=_cmd_train_surrogate)
 
     p = sub.add_parser("criticize", help="where the model fails and which effect it lacks")
-    p.add_argument("dir", help="campaign folder (TRC layout)")
+    p.add_argument("dir", help=f"{records}, or a backbones CSV")
     p.add_argument("--model", required=True, help="model JSON file")
     p.add_argument("--out", required=True, help="report folder (criticism.json + figures)")
     p.add_argument(
         "--rounds", type=int, default=0, help="add the best proposed effect this many times"
     )
+    add_record_options(p)
     p.set_defaults(func=_cmd_criticize)
 
-    p = sub.add_parser("update", help="stochastic updating of the model on measured backbones")
-    p.add_argument("dir", help="campaign folder (TRC layout) or a backbones CSV")
+    p = sub.add_parser(
+        "update", help="stochastic updating of the model on measured backbones",
+        description="Exit codes: 0 converged, 2 bad input, 3 posterior written but NOT "
+        "converged (r̂ > 1.01, ESS < 400 or divergences).",
+    )  # fmt: skip
+    p.add_argument("dir", help=f"{records}, or a backbones CSV")
+    p.add_argument(
+        "--population", choices=POPULATION_MODELS, default="matching",
+        help="matching: the paper's population matching (a population range); hierarchical: "
+        "per-curve parameters from an estimated population, with a likelihood of every "
+        "measured point (LOO) (default: matching)",
+    )  # fmt: skip
     p.add_argument("--model", help="model JSON file (for --forward harmonic|pll)")
-    p.add_argument("--forward", choices=("surrogate", "harmonic", "pll"), default="surrogate")
+    p.add_argument(
+        "--forward", choices=("surrogate", "harmonic", "pll"),
+        help="forward model (default: surrogate; harmonic for --population hierarchical)",
+    )  # fmt: skip
     p.add_argument("--surrogate", help="surrogate folder (for --forward surrogate)")
     p.add_argument("--out", required=True, help="posterior netCDF file")
     p.add_argument(
-        "--sampler", choices=("metropolis", "demetropolisz", "nuts"), default="metropolis"
+        "--sampler", choices=SAMPLERS,
+        help="default: metropolis (matching on surrogate or pll), nutpie (on harmonic)",
+    )  # fmt: skip
+    p.add_argument(
+        "--draws",
+        type=int,
+        help="draws per chain (default 30000 metropolis, 2000 matching on harmonic, "
+        "1000 hierarchical)",
     )
-    p.add_argument("--draws", type=int, default=30_000, help="draws per chain (default 30000)")
-    p.add_argument("--tune", type=int, default=2_000, help="tuning steps (default 2000)")
+    p.add_argument("--tune", type=int, help="tuning steps (default 3000 metropolis, 1000 nutpie)")
     p.add_argument("--chains", type=int, default=2, help="chains (default 2)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--report", help="also write the arviz report into this folder")
@@ -211,6 +411,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--resume", action="store_true",
         help="continue a stopped run from its trace instead of starting again",
     )  # fmt: skip
+    add_record_options(p)
     p.set_defaults(func=_cmd_update)
 
     p = sub.add_parser("report", help="HTML report of a run")
@@ -238,16 +439,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     def one_line(message, category, *_, **__) -> str:
         return f"pm-joint {args.command}: {category.__name__}: {message}\n"
 
+    def show(message, category, *_, **__) -> None:
+        from tqdm.auto import tqdm
+
+        # Through tqdm: a progress bar on the terminal is cleared first and redrawn after.
+        tqdm.write(one_line(message, category).rstrip("\n"), file=sys.stderr)
+
+    showwarning = warnings.showwarning
     warnings.formatwarning = one_line  # a warning is one line, as an error is
+    # Only where warnings reach the terminal: a caller that records them (pytest.warns,
+    # catch_warnings(record=True)) swaps the module's private printer for its own list.
+    printer = getattr(warnings, "_showwarnmsg_impl", None)
+    if showwarning.__module__ == "warnings" and getattr(printer, "__module__", None) == "warnings":
+        warnings.showwarning = show
     try:
-        args.func(args)
+        code = args.func(args) or 0
     except (ValueError, FileNotFoundError, NotADirectoryError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"pm-joint {args.command}: error: {reason}", file=sys.stderr)
         return 2
     finally:
         warnings.formatwarning = formatwarning
-    return 0
+        warnings.showwarning = showwarning
+    return code
 
 
 if __name__ == "__main__":

@@ -132,15 +132,39 @@ def posterior_sections(
         for level, entry in content["level_pdfs"].items()
     ]
     sampler = content.get("sampler", {})
-    return [
+    verdict = content.get("convergence") or {}
+    convergence_rows = [
+        {k: row[k] for k in ("variable", "r_hat", "ess_bulk", "ess_tail", "ok")}
+        for row in verdict.get("parameters", [])
+    ]
+    population = content.get("population_model") or {}
+    check = content.get("identifiability") or {}
+    loo = content.get("loo")
+    paragraphs = [
+        # The verdict first: an unconverged run must not read as a result.
+        f"Convergence verdict: {verdict.get('headline', 'not computed (an older report)')}",
+        population.get("meaning", ""),
+        f"Identifiability: {check['text']}." if check else "",
+        _loo_text(loo),
+        f"Sampler: {sampler.get('sampler')}, {sampler.get('draws')} draws × "
+        f"{sampler.get('chains')} chains; mean acceptance {sampler.get('acceptance_rate')}.",
+    ]
+    sections = [
         Section(
-            "Stochastic updating",
-            f"Sampler: {sampler.get('sampler')}, {sampler.get('draws')} draws × "
-            f"{sampler.get('chains')} chains; mean acceptance {sampler.get('acceptance_rate')}.",
-            tables=[("posterior summary", summary_rows)],
+            "Stochastic updating" + ("" if verdict.get("converged", False) else " — NOT CONVERGED"),
+            "\n\n".join(p for p in paragraphs if p),
+            tables=[
+                ("convergence per variable", convergence_rows),
+                ("posterior summary", summary_rows),
+            ],
             figures=[(str(rel / f), f.removesuffix(".png").replace("_", " ")) for f in files],
             files=[(str(rel / "report.json"), "report.json")],
         ),
+    ]
+    if not pdf_rows:
+        return sections
+    return [
+        *sections,
         Section(
             "PDFs at low, mid and high amplitude",
             "Measured against sampled frequencies, each with its best-fitting distribution "
@@ -148,6 +172,19 @@ def posterior_sections(
             tables=[("per amplitude level", pdf_rows)],
         ),
     ]
+
+
+def _loo_text(loo: Any) -> str:
+    """LOO in words: a refusal, the figures, or nothing."""
+    if loo is None:
+        return ""
+    if isinstance(loo, str):
+        return f"LOO: {loo}."
+    return (
+        f"LOO over {loo['n_points']} measured points: elpd {loo['elpd_loo']:.1f} "
+        f"(SE {loo['se']:.1f}), p_loo {loo['p_loo']:.1f}; {loo['pareto_k_above_0.7']} points "
+        "with Pareto k > 0.7 (their LOO estimates are unreliable)."
+    )
 
 
 def criticism_section(

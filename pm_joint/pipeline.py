@@ -10,6 +10,7 @@ subcommands and the demo call these and nothing else. Figures come from
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import multiprocessing
 import os
@@ -24,9 +25,11 @@ import xarray as xr
 from identification.analytical import harmonic, pll
 from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import Backbone, BackboneSet
+from identification.measurements.columns import ColumnCampaign
+from identification.measurements.decay import extract_decay_backbone
 from identification.measurements.records import Campaign
 from identification.model import JointModel, parameter_bounds
-from identification.rig import RIG_PRESETS, rig_for_preset
+from identification.rig import RIG_PRESETS, ForceRig, rig_for_preset
 from identification.sindy import (
     PAPER_LIBRARY,
     Identification,
@@ -35,10 +38,14 @@ from identification.sindy import (
     validate,
 )
 from pm_joint import html, plotting
+from pm_joint.analysis import convergence_verdict, identifiability, loo, population_predictive
 from pm_joint.inference import (
+    POPULATION_MODELS,
+    SAMPLER_DEFAULTS,
     amplitudes_within_surrogate,
     build_model,
     continue_sampling,
+    hierarchical_model,
     sample,
     save_posterior,
 )
@@ -76,22 +83,32 @@ def write_rig_campaign(
     n_levels: int = 10,
     workers: int | None = 1,
     progress: bool = True,
-) -> Campaign:
+    executor: Any = None,
+    force_driven: bool = False,
+    quantity: str = "velocity",
+) -> Campaign | ColumnCampaign:
     """Write a virtual campaign of the rig preset ``preset`` in the TRC layout.
 
-    ``n_levels`` excitation levels per record. Records are simulated and
+    ``n_levels`` excitation levels per record. With ``force_driven`` the
+    structure is driven by a measured force and each record ends in a
+    ring-down, written in the column layout with a ``quantity`` response
+    (:class:`~identification.rig.force.ForceRig`). Records are simulated and
     written by ``workers`` processes (None: one per CPU); the files do not
     depend on it. With more than one, call this from a script's
     ``if __name__ == "__main__":`` block: worker processes start by importing
-    the main script.
+    the main script. An ``executor`` (e.g. a dask Client) replaces the
+    ``workers`` processes.
     """
     if preset not in RIG_PRESETS:
         raise ValueError(f"unknown rig preset {preset!r}; available: {', '.join(RIG_PRESETS)}")
-    rig = rig_for_preset(preset, levels=n_levels)
+    if force_driven:
+        rig = ForceRig.preset(preset, levels=n_levels, response_quantity=quantity)
+    else:
+        rig = rig_for_preset(preset, levels=n_levels)
     workers = min(workers or os.cpu_count() or 1, assemblies * runs)
     options = {"assemblies": assemblies, "runs": runs, "seed": seed, "progress": progress}
-    if workers < 2:
-        return rig.write_campaign(out, **options)
+    if executor is not None or workers < 2:
+        return rig.write_campaign(out, executor=executor, **options)
     # forkserver: workers start from a clean process, not a fork of this
     # (possibly multi-threaded) one.
     context = multiprocessing.get_context("forkserver")
@@ -117,16 +134,43 @@ def identify_campaign(
 ) -> Identification:
     """SINDy identification from the first ``n_records`` records; the workspace's model becomes it.
 
-    With ``out`` (a JSON path) the model is written there, with the velocity
-    and acceleration validation figures (the paper's Figs. 9–10) beside it.
+    Records that cannot be identified are refused first: a base-driven record
+    whose excitation is zero, a free decay that does not decay
+    (:func:`~identification.measurements.decay.extract_decay_backbone`; a
+    driven column record without an excitation is refused when read). A
+    force-driven record drives the model with the equivalent base acceleration
+    ``−g·F``, ``g`` its stated or estimated modal forcing gain
+    (:mod:`identification.measurements.forcing`); the model keeps the median
+    gain as its ``forcing_gain``. With ``out`` (a JSON path) the model is
+    written there, with the velocity and acceleration validation figures (the
+    paper's Figs. 9–10) beside it.
     """
     chosen = workspace.records[: min(n_records, len(workspace.records))]
+    gains = []
+    for i, record in enumerate(chosen):
+        if record.test == "free-decay":
+            extract_decay_backbone(record, **workspace.decay_options)  # refuses a non-decay
+        elif not np.any(record.excitation):
+            raise ValueError(
+                f"{record.path or record.name}: the excitation ({record.excitation_kind}) is "
+                "zero throughout: nothing drives this record, and a steady response alone "
+                "gives its own frequency as the 'natural' one; a ring-down is read with "
+                "--test free-decay"
+            )
+        if record.excitation_kind == "force":
+            gains.append(record.forcing_gain)
+            chosen[i] = record.with_forcing_gain(record.forcing_gain)
     result = identify(chosen, list(effects), **options)
+    if gains:
+        model = result.model.with_forcing_gain(float(np.median(gains)))
+        result = dataclasses.replace(result, model=model)
     workspace.model = result.model
     if out is not None:
         out = Path(out)
         result.model.to_json(out)
-        validation = validate(result.model, record_kinematics(chosen[0]))
+        preprocessing = {k: options[k] for k in ("n_harmonics", "edge_periods", "band_hz")
+                         if k in options}  # fmt: skip
+        validation = validate(result.model, record_kinematics(chosen[0], **preprocessing))
         for channel in ("velocity", "acceleration"):
             figure = plotting.plot_validation_figure(validation, channel)
             path = out.with_name(f"{out.stem}_validation_{channel}.png")
@@ -171,7 +215,7 @@ def analytical_backbones(
 
 
 def criticize_campaign(
-    folder: str | os.PathLike,
+    folder: str | os.PathLike | Workspace,
     model: JointModel | str | os.PathLike,
     out: str | os.PathLike,
     *,
@@ -183,10 +227,15 @@ def criticize_campaign(
 
     ``measured`` are the campaign's backbones when already extracted (with the
     harmonics they carry); else the campaign's workspace gives them (its
-    ``backbones.csv`` when fresh, else one extraction from the records).
+    ``backbones.csv`` when fresh, else one extraction from the records);
+    ``folder`` may be that workspace.
     ``posterior`` (a DataTree) gives the predictive bands and the medians the
-    model is compared at. Writes ``criticism.json`` and figures to ``out`` (for
-    the last round, whose history holds every step) and returns the last
+    model is compared at; from a hierarchical posterior these are the draws of
+    the population's median assembly, so the test widens by the uncertainty of
+    the population-mean curve, not by the scatter of the assemblies
+    (:func:`~pm_joint.analysis.posterior.posterior_samples`). Writes
+    ``criticism.json`` and figures to ``out`` (for the last round, whose history
+    holds every step) and returns the last
     :class:`~identification.criticism.criticism.Criticism`.
     """
     from pm_joint.analysis.posterior import criticize
@@ -194,7 +243,8 @@ def criticize_campaign(
     if not isinstance(model, JointModel):
         model = JointModel.from_json(model)
     if measured is None:
-        measured = Workspace(folder).backbones
+        workspace = folder if isinstance(folder, Workspace) else Workspace(folder)
+        measured = workspace.backbones
     crit = criticize(model, measured, posterior=posterior)
     for _ in range(rounds):
         proposals = crit.missing()
@@ -225,6 +275,7 @@ def train_surrogate_stage(
     max_epochs: int | None = None,
     seed: int = 0,
     progress: bool = True,
+    executor: Any = None,
 ) -> SurrogateRuntime:
     """Dataset (analytical + measured curves), training and ONNX export, as the paper.
 
@@ -235,7 +286,9 @@ def train_surrogate_stage(
     curves (harmonic balance, inverted onto fixed excitation levels) make up
     the rest of ``n_curves``. Writes ``out/surrogate.onnx``, its sidecar,
     ``out/dataset.npz`` and a prediction figure; the workspace's surrogate
-    becomes the exported runtime, which is returned.
+    becomes the exported runtime, which is returned. The dataset's curves are
+    computed on ``executor`` when given (a process pool or a dask Client: the
+    dataset is the serial one, bit for bit).
     """
     # torch only here: `pm-joint update` and the reports never load it.
     from surrogates.export import export_surrogate
@@ -259,7 +312,7 @@ def train_surrogate_stage(
     )
     dataset = generate_dataset(
         model, names, max(n_curves - n_measured, 1), bounds=box,
-        amplitude_range_m=(low, high), seed=seed, progress=progress,
+        amplitude_range_m=(low, high), seed=seed, progress=progress, executor=executor,
     )  # fmt: skip
     if labels is not None:
         dataset = add_measured(dataset, measured, labels)
@@ -283,14 +336,15 @@ def update_backbones(
     workspace: Workspace,
     out: str | os.PathLike,
     *,
+    population: str = "matching",
     forward: str = "surrogate",
     names: Sequence[str] | None = None,
     amplitudes_m: np.ndarray | None = None,
-    channels: Sequence[str] = ("frequency_hz",),
+    channels: Sequence[str] | None = None,
     family: str = "copula",
-    sampler: str = "metropolis",
-    draws: int = 30_000,
-    tune: int = 2_000,
+    sampler: str | None = None,
+    draws: int | None = None,
+    tune: int | None = None,
     chains: int = 2,
     seed: int = 0,
     trace: str | os.PathLike | None = None,
@@ -298,30 +352,69 @@ def update_backbones(
 ) -> xr.DataTree:
     """Stochastic updating on the workspace's backbones; saves the posterior (netCDF).
 
-    The likelihood density is the workspace's (fitted once) at ``amplitudes_m``
-    (default: for a surrogate, the levels both it and the measurements cover,
-    :func:`~pm_joint.inference.amplitudes_within_surrogate`; else the default
-    grid) and is saved with the posterior, so a later report draws exactly what
-    was sampled. With ``trace`` (a zarr folder) the draws are written there as
-    they are taken; with ``resume`` a run that stopped continues from that
-    folder (:func:`~pm_joint.inference.continue_sampling`). Without it an
-    existing folder is refused rather than overwritten. The workspace's
+    ``population`` picks the population model:
+
+    ``"matching"``
+        The paper's population matching (:func:`~pm_joint.inference.build_model`):
+        the likelihood density is the workspace's (fitted once) at
+        ``amplitudes_m`` (default: for a surrogate, the levels both it and the
+        measurements cover, :func:`~pm_joint.inference.amplitudes_within_surrogate`;
+        else the default grid), saved with the posterior so a later report draws
+        exactly what was sampled. The posterior is a population range; whether
+        the forward model is one-to-one over the box is checked at the draws
+        (:func:`~pm_joint.analysis.identifiability`, attribute ``identifiability``).
+    ``"hierarchical"``
+        The hierarchical model (:func:`~pm_joint.inference.hierarchical_model`)
+        on the harmonic-balance graph: the workspace's model is the template,
+        ``names`` (default :func:`~identification.fitting.least_squares.default_free`)
+        vary from assembly to assembly, every measured point of frequency and
+        damping (``channels``) is scored. The saved posterior has its
+        ``log_likelihood`` group, its LOO (attribute ``loo``) and a
+        ``posterior_predictive`` group of new assemblies (population scatter
+        and noise included) at 41 amplitudes over the measured range.
+
+    ``sampler``, ``draws`` and ``tune`` default per population and forward model
+    (:data:`~pm_joint.inference.SAMPLER_DEFAULTS`). With ``trace`` (a folder)
+    the draws are written there as they are taken; with ``resume`` a run that
+    stopped continues from that folder
+    (:func:`~pm_joint.inference.continue_sampling`). Without it an existing
+    folder is refused rather than overwritten. The posterior carries its
+    convergence verdict (attribute ``convergence``, JSON); the workspace's
     posterior becomes the returned DataTree.
     """
+    if population not in POPULATION_MODELS:
+        raise ValueError(f"population must be one of {POPULATION_MODELS}, got {population!r}")
+    if (population, forward) not in SAMPLER_DEFAULTS:
+        runs_on = ", ".join(f for p, f in SAMPLER_DEFAULTS if p == population)
+        raise ValueError(f"population model {population!r} does not run on forward model "
+                         f"{forward!r}; it runs on: {runs_on}")  # fmt: skip
+    defaults = SAMPLER_DEFAULTS[population, forward]
+    sampler = sampler or defaults["sampler"]
+    draws = draws or defaults["draws"]
+    tune = tune or defaults["tune"]
     earlier_run = trace is not None and Path(trace).exists()
     if earlier_run and not resume:
         raise ValueError(
             f"{trace} holds the draws of an earlier run: resume it, or remove it to start again"
         )
     measured = workspace.backbones
-    surrogate = workspace.surrogate if forward == "surrogate" else None
-    if amplitudes_m is None and surrogate is not None:
-        amplitudes_m = amplitudes_within_surrogate(measured, surrogate)
-    density = workspace.density(amplitudes_m, channels=channels, family=family)
-    pm_model = build_model(
-        workspace.model, measured, forward=forward, surrogate=surrogate, names=names,
-        density=density,
-    )  # fmt: skip
+    density = surrogate = None
+    if population == "hierarchical":
+        names = list(names or default_free(workspace.model))
+        channels = tuple(channels or ("frequency_hz", "damping_ratio"))
+        pm_model = hierarchical_model(
+            workspace.model, measured, names, amplitudes_m=amplitudes_m, channels=channels
+        )
+    else:
+        channels = tuple(channels or ("frequency_hz",))
+        surrogate = workspace.surrogate if forward == "surrogate" else None
+        if amplitudes_m is None and surrogate is not None:
+            amplitudes_m = amplitudes_within_surrogate(measured, surrogate)
+        density = workspace.density(amplitudes_m, channels=channels, family=family)
+        pm_model = build_model(
+            workspace.model, measured, forward=forward, surrogate=surrogate, names=names,
+            density=density,
+        )  # fmt: skip
     if earlier_run:  # and resume
         idata = continue_sampling(pm_model, trace, draws=draws, sampler=sampler)
     else:
@@ -329,10 +422,39 @@ def update_backbones(
             pm_model, sampler=sampler, draws=draws, tune=tune, chains=chains, random_seed=seed,
             trace=trace,
         )  # fmt: skip
-    metadata = {"forward": forward, "sampler": sampler, "surrogate": str(surrogate)}
+    verdict = convergence_verdict(idata)
+    idata.attrs["convergence"] = json.dumps(verdict.to_dict())
+    if population == "hierarchical":
+        _hierarchical_extras(idata, pm_model, workspace.model, names, channels, measured)
+    else:
+        idata.attrs["identifiability"] = json.dumps(identifiability(pm_model, idata))
+    metadata = {"forward": forward, "sampler": sampler, "surrogate": str(surrogate),
+                "population_model": pm_model.population_model}  # fmt: skip
     save_posterior(idata, out, metadata=metadata, density=density)
     workspace.posterior = idata
     return idata
+
+
+def _hierarchical_extras(idata, pm_model, model, names, channels, measured) -> None:
+    """LOO (attribute ``loo``) and new assemblies (group ``posterior_predictive``)."""
+    result = loo(idata, pm_model)
+    pareto_k = np.asarray(result.pareto_k).ravel()
+    idata.attrs["loo"] = json.dumps(
+        {
+            "elpd_loo": float(result.elpd),
+            "se": float(result.se),
+            "p_loo": float(result.p),
+            "n_points": int(pareto_k.size),
+            "pareto_k_above_0.7": int(np.sum(pareto_k > 0.7)),
+        }
+    )
+    low = min(b.amplitude_range_m[0] for b in measured)
+    high = max(b.amplitude_range_m[1] for b in measured)
+    new = population_predictive(idata, model, names, np.geomspace(low, high, 41),
+                                channels=channels)  # fmt: skip
+    # arviz's layout: one chain of draws (of new assemblies, not of the chains' order).
+    idata["posterior_predictive"] = xr.DataTree(new.rename(sample="draw").expand_dims(chain=1))
+    idata.attrs["varying_parameters"] = json.dumps(list(names))
 
 
 def posterior_report(workspace: Workspace, out: str | os.PathLike) -> dict[str, Any]:

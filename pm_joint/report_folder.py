@@ -20,6 +20,7 @@ import xarray as xr
 from identification.artifacts import atomic_write_text
 from identification.measurements.backbone import BackboneSet
 from pm_joint.analysis import (
+    convergence_verdict,
     correlation_matrix,
     level_pdfs,
     resolve_var_names,
@@ -27,6 +28,7 @@ from pm_joint.analysis import (
     summarize,
 )
 from pm_joint.distributions import BackboneDensity
+from pm_joint.inference.models import HIERARCHICAL, POPULATION_MATCHING
 from pm_joint.inference.storage import stored_density
 from pm_joint.plotting import (
     plot_correlation,
@@ -37,7 +39,28 @@ from pm_joint.plotting import (
     save_png,
 )
 
-__all__ = ["report"]
+__all__ = ["POPULATION_MEANING", "report"]
+
+#: What each population model's posterior is, in the words every report prints.
+POPULATION_MEANING = {
+    POPULATION_MATCHING: (
+        "Population matching (the paper's method): the posterior is the set of parameter "
+        "vectors whose predicted backbones look like members of the measured population, "
+        "scored by the population density fitted to the measured curves. Its intervals are "
+        "a population range, not the uncertainty of one assembly; it is the population's "
+        "distribution only where the forward model is one-to-one over the prior box (see "
+        "the identifiability check), else the prior box shapes the marginals. It is no "
+        "likelihood of the measured curves: LOO and WAIC are refused."
+    ),
+    HIERARCHICAL: (
+        "Hierarchical population model: every measured curve has its own parameters, drawn "
+        "from a log-normal population whose median ({p}_population) and log-spread "
+        "(log_spread) are estimated; every measured point is scored by a normal likelihood "
+        "with an amplitude-dependent measurement error. Intervals of the population "
+        "parameters are posterior uncertainty; new assemblies (posterior_predictive) include "
+        "the population scatter and the noise; LOO scores the measured points."
+    ),
+}
 
 
 def _jsonable(value: Any) -> Any:
@@ -116,35 +139,55 @@ def report(
     Returns
     -------
     dict
-        The content of ``report.json``: ``var_names``, ``summary`` (records),
-        ``correlation`` (``variables``, ``matrix``), ``level_pdfs``, ``sampler``
-        and ``files`` (names in ``out``, ``report.json`` last).
+        The content of ``report.json``: ``convergence`` (the verdict,
+        :func:`~pm_joint.analysis.convergence_verdict`) first, then
+        ``population_model`` (which model, and what its posterior means),
+        ``identifiability`` (population matching) or ``loo`` (hierarchical),
+        ``level_pdfs`` (population matching; empty otherwise), ``var_names``,
+        ``summary`` (records), ``correlation`` (``variables``, ``matrix``),
+        ``sampler`` and ``files`` (names in ``out``, ``report.json`` last).
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     names = resolve_var_names(idata, var_names)
-    density = density or stored_density(idata)
-    if density is None:
-        warnings.warn(
-            "no likelihood density is stored with this posterior (written before pm-joint "
-            "stored it, or not from build_model): refitting one at the default amplitude levels",
-            UserWarning,
-            stacklevel=2,
-        )
-        density = BackboneDensity.fit(measured)
-    pdfs = level_pdfs(idata, density, name=name)
-    corr = correlation_matrix(idata, names)
+    verdict = convergence_verdict(idata)
+    kind = idata.attrs.get("population_model", POPULATION_MATCHING)
     files = [*plot_pairs(idata, names, out), *plot_trace_rank(idata, names, out)]
+    corr = correlation_matrix(idata, names)
     files.append(save_png(plot_correlation(corr), out / "correlation.png"))
-    backbones = plot_predictive_backbones(idata, density, measured, name=name)
-    files.append(save_png(backbones, out / "predictive_backbones.png"))
-    files.append(save_png(plot_level_pdfs(pdfs), out / "level_pdfs.png"))
+    content: dict[str, Any] = {
+        "convergence": verdict.to_dict(),
+        "population_model": {"kind": kind, "meaning": POPULATION_MEANING[kind]},
+    }
+    if kind == POPULATION_MATCHING:
+        density = density or stored_density(idata)
+        if density is None:
+            warnings.warn(
+                "no likelihood density is stored with this posterior (written before pm-joint "
+                "stored it, or not from build_model): refitting one at the default amplitude "
+                "levels",
+                UserWarning,
+                stacklevel=2,
+            )
+            density = BackboneDensity.fit(measured)
+        pdfs = level_pdfs(idata, density, name=name)
+        backbones = plot_predictive_backbones(idata, density, measured, name=name)
+        files.append(save_png(backbones, out / "predictive_backbones.png"))
+        files.append(save_png(plot_level_pdfs(pdfs), out / "level_pdfs.png"))
+        content["level_pdfs"] = _level_pdfs_record(pdfs)
+        stored = idata.attrs.get("identifiability")
+        content["identifiability"] = json.loads(stored) if stored else None
+        content["loo"] = "refused: population matching has no likelihood of the measured curves"
+    else:
+        stored = idata.attrs.get("loo")
+        content["loo"] = json.loads(stored) if stored else None
+        content["level_pdfs"] = {}
     content = _jsonable(
         {
+            **content,
             "var_names": names,
             "summary": summarize(idata, names).reset_index(names="variable").to_dict("records"),
             "correlation": {"variables": list(corr.columns), "matrix": corr.values},
-            "level_pdfs": _level_pdfs_record(pdfs),
             "sampler": sampler_info(idata, sampler),
             "files": [p.name for p in files] + ["report.json"],
         }

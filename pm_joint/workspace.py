@@ -1,9 +1,10 @@
 """One run's data, each piece read or fitted once: the campaign workspace.
 
-A :class:`Workspace` stands for a campaign folder (or a backbones CSV) and what
-a run makes of it: the records, their backbones, the joint model, the
-surrogate, the likelihood densities and the posterior. Each is read, extracted
-or fitted on first use and kept; the pipeline's stages read from the workspace
+A :class:`Workspace` stands for a campaign (a folder of records in the TRC or
+a column layout, or one record file) or a backbones CSV, and what a run makes
+of it: the records, their backbones, the joint model, the surrogate, the
+likelihood densities and the posterior. Each is read, extracted or fitted on
+first use and kept; the pipeline's stages read from the workspace
 and put what they make back into it, so that a chain of stages never reads a
 record file twice, loads a surrogate twice or refits a density.
 """
@@ -20,6 +21,12 @@ import xarray as xr
 from numpy.typing import ArrayLike
 
 from identification.measurements.backbone import BackboneSet
+from identification.measurements.columns import (
+    ColumnCampaign,
+    ColumnLayout,
+    is_backbone_table,
+    open_records,
+)
 from identification.measurements.extraction import extract_backbones
 from identification.measurements.records import Campaign, Record
 from identification.model import JointModel
@@ -43,11 +50,12 @@ class RecordCache(Sequence[Record]):
     counts the file reads per record name.
     """
 
-    def __init__(self, campaign: Campaign, max_bytes: int = 2**30) -> None:
+    def __init__(self, campaign: Campaign | ColumnCampaign, max_bytes: int = 2**30) -> None:
         self.campaign = campaign
         self.max_bytes = max_bytes
         self.reads: dict[str, int] = {}
         self._kept: dict[int, Record] = {}
+        self._sizes: dict[int, int] = {}
 
     def __len__(self) -> int:
         return len(self.campaign)
@@ -60,14 +68,16 @@ class RecordCache(Sequence[Record]):
             return self._kept[index]
         record = self.campaign[index]
         self.reads[record.name] = self.reads.get(record.name, 0) + 1
-        if self.kept_bytes + record.data.nbytes <= self.max_bytes:
+        size = record.data.nbytes
+        if self.kept_bytes + size <= self.max_bytes:
             self._kept[index] = record
+            self._sizes[index] = size
         return record
 
     @property
     def kept_bytes(self) -> int:
         """Bytes of sample data held now."""
-        return sum(r.data.nbytes for r in self._kept.values())
+        return sum(self._sizes[i] for i in self._kept)
 
 
 class Workspace:
@@ -76,8 +86,12 @@ class Workspace:
     Parameters
     ----------
     source
-        A campaign folder in the TRC layout, or a backbones CSV (then there are
-        no records, only backbones).
+        A campaign folder (TRC or column layout), one record file (TRC or column
+        layout, a campaign of one), or a backbones CSV (then there are no
+        records, only backbones).
+    layout
+        How column-layout records read and the test type of every record
+        (:class:`~identification.measurements.columns.ColumnLayout`).
     model
         The joint model, or its JSON file (read on first use).
     surrogate
@@ -85,9 +99,13 @@ class Workspace:
     posterior
         A posterior file or trace folder of an earlier run (read on first use).
     backbones_csv
-        Where a campaign's backbones are kept; default ``source/backbones.csv``.
+        Where a campaign's backbones are kept; default ``source/backbones.csv``
+        for a folder, ``<stem>_backbones.csv`` beside a record file.
     n_periods
         Periods per hold phase when backbones are extracted.
+    decay_options
+        ``window_periods``, ``edge_periods`` and ``band_hz`` of free-decay extraction
+        (:func:`~identification.measurements.extraction.extract_backbone`).
     record_cache_bytes
         Sample data of records kept in memory once read (:class:`RecordCache`;
         the full demo's 25 records of 26 s at 10 kHz take about 1 GB).
@@ -109,19 +127,28 @@ class Workspace:
         self,
         source: str | os.PathLike,
         *,
+        layout: ColumnLayout | None = None,
         model: JointModel | str | os.PathLike | None = None,
         surrogate: SurrogateRuntime | str | os.PathLike | None = None,
         posterior: str | os.PathLike | None = None,
         backbones_csv: str | os.PathLike | None = None,
         n_periods: int = 70,
+        decay_options: dict | None = None,
         record_cache_bytes: int = 2**30,
         progress: bool = True,
     ) -> None:
         self.source = Path(source)
-        self.is_campaign = self.source.is_dir()
-        default_csv = self.source / BACKBONES_FILE if self.is_campaign else self.source
+        self.layout = layout or ColumnLayout()
+        self.is_campaign = not is_backbone_table(self.source)
+        if not self.is_campaign:
+            default_csv = self.source
+        elif self.source.is_file():
+            default_csv = self.source.with_name(f"{self.source.stem}_{BACKBONES_FILE}")
+        else:
+            default_csv = self.source / BACKBONES_FILE
         self.backbones_csv = Path(backbones_csv) if backbones_csv is not None else default_csv
         self.n_periods = n_periods
+        self.decay_options = dict(decay_options or {})
         self.record_cache_bytes = record_cache_bytes
         self.progress = progress
         self.backbones_origin = "not read yet"
@@ -135,13 +162,13 @@ class Workspace:
 
     # ------------------------------------------------------------ the records
     @cached_property
-    def campaign(self) -> Campaign:
-        """The campaign folder's records (ValueError for a CSV source: it has none)."""
+    def campaign(self) -> Campaign | ColumnCampaign:
+        """The campaign's records (ValueError for a backbones table: it has none)."""
         if not self.is_campaign:
-            if not self.source.exists():
-                raise ValueError(f"{self.source}: campaign folder not found")
             raise ValueError(f"{self.source} is a backbones table, not a campaign: no records")
-        return Campaign(self.source)
+        if not self.source.exists():
+            raise ValueError(f"{self.source}: campaign folder not found")
+        return open_records(self.source, self.layout)
 
     @cached_property
     def records(self) -> RecordCache:
@@ -164,7 +191,7 @@ class Workspace:
     def extract_backbones(self) -> BackboneSet:
         """Extract the backbones of every record now, write them to the CSV and keep them."""
         backbones = extract_backbones(
-            self.records, n_periods=self.n_periods, progress=self.progress
+            self.records, n_periods=self.n_periods, progress=self.progress, **self.decay_options
         )
         backbones.to_csv(self.backbones_csv)
         self.backbones_origin = (

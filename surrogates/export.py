@@ -6,7 +6,9 @@ parameters ``(batch, n_params)`` and returns physical backbones ``(batch,
 n_levels, n_channels)``, float32, with a dynamic batch axis. It is exported with
 ``torch.onnx.export``'s dynamo exporter (torch's default). The sidecar carries
 everything a user needs to trust and use the graph (see
-:mod:`surrogates.runtime`, which reads the pair back).
+:mod:`surrogates.runtime`, which reads the pair back): the grid, the scalers,
+the network sizes, the data counts (which measured curves were training data)
+and the test figures beside the baselines.
 """
 
 from __future__ import annotations
@@ -119,8 +121,14 @@ def _sidecar(surrogate: Surrogate, graph: bytes, opset: int) -> dict[str, Any]:
                 "low": spec.bounds[:, 0].tolist(),
                 "high": spec.bounds[:, 1].tolist(),
             },
+            "head": {
+                "degree": surrogate.model.head_degree,
+                "kind": "per (level, channel) polynomial in the box-scaled parameters, added "
+                "in physical units; the networks learn its residual (degree 0: no head)",
+            },
             "output": {
-                "kind": f"standardise per {surrogate.config.output_scaling}",
+                "kind": f"standardise per {surrogate.config.output_scaling}"
+                + (" the head's residual" if surrogate.model.head_degree else ""),
                 "offset": surrogate.output_offset.tolist(),
                 "scale": surrogate.output_scale.tolist(),
             },
@@ -133,8 +141,14 @@ def _sidecar(surrogate: Surrogate, graph: bytes, opset: int) -> dict[str, Any]:
             "epochs": {stage: len(records) for stage, records in surrogate.history.items()},
             "best_epochs": surrogate.best_epochs,
             "train_seconds": surrogate.train_seconds,
+            "network": surrogate.sizes,
+            "data": surrogate.data,
+            # From the split that stopped training early: not an independent figure.
             "validation_metrics": surrogate.metrics,
         },
+        # The independent figures: the test split, beside the baselines (None when the
+        # surrogate was trained on bare arrays, without a test split).
+        "test": surrogate.test_report,
         # torch's own version string names its build (e.g. +cu132); metadata's does not.
         "versions": {
             **versions("pm-joint", "onnx"),

@@ -31,6 +31,8 @@ import torch
 from torch import nn
 from torch.nn import functional
 
+from surrogates.baselines import monomial_factors
+
 __all__ = [
     "Autoencoder",
     "Decoder",
@@ -39,6 +41,7 @@ __all__ = [
     "LatentRegressor",
     "NetConfig",
     "PhysicalSurrogate",
+    "network_sizes",
 ]
 
 
@@ -165,10 +168,28 @@ def _float32(values: np.ndarray) -> torch.Tensor:
 class PhysicalSurrogate(nn.Module):
     """FFNN + decoder with the scalings folded in: physical parameters → physical backbones.
 
-    The input is min–max scaled with the training box, ``(p − low) / (high − low)``;
-    the decoder's output is un-scaled with ``y · scale + offset``, where ``offset``
-    and ``scale`` have shape ``(n_levels, n_channels)``. This is the graph that is
-    exported to ONNX, so the artifact needs no pre- or post-processing.
+    The input is min–max scaled with the training box, ``u = (p − low) / (high − low)``;
+    the network's output ``s(u) = decoder(ffnn(u))`` lives in the scaled space and
+    is un-scaled with ``y = s · scale + offset`` (``offset``, ``scale``:
+    ``(n_levels, n_channels)``). Two optional parts:
+
+    ``head``
+        ``(degree, coefficients (n_monomials, n_levels, n_channels))``: a
+        polynomial in ``u`` per (level, channel) in physical units, the monomials
+        of :func:`~surrogates.baselines.monomial_factors`;
+        ``y = s · scale + offset + head(u)``, so the network learns the
+        (standardised) residual of a regression, a baseline it must beat, rather
+        than the whole curve. Each monomial is a product of ``degree`` factors
+        ``u · select + offset`` (one-hot columns, or the constant 1), so the graph
+        needs no gather.
+    ``probability_channels``
+        ``(n_channels,)`` booleans: those channels are logits in the scaled
+        space and leave the graph through a sigmoid, as probabilities (the
+        amplitude grid's ``has_backbone`` mask).
+
+    This is the graph that is exported to ONNX, so the artifact needs no pre- or
+    post-processing (ops: Gemm/MatMul, Elu, Relu, Reshape, Conv, Transpose and
+    elementwise arithmetic, plus Sigmoid with a probability channel).
     """
 
     def __init__(
@@ -178,6 +199,9 @@ class PhysicalSurrogate(nn.Module):
         bounds: np.ndarray,
         output_offset: np.ndarray,
         output_scale: np.ndarray,
+        *,
+        head: tuple[int, np.ndarray] | None = None,
+        probability_channels: np.ndarray | None = None,
     ) -> None:
         super().__init__()
         self.regressor, self.decoder = regressor, decoder
@@ -186,15 +210,73 @@ class PhysicalSurrogate(nn.Module):
         self.register_buffer("input_span", _float32(bounds[:, 1] - bounds[:, 0]))
         self.register_buffer("output_offset", _float32(output_offset))
         self.register_buffer("output_scale", _float32(output_scale))
+        self.head_degree = 0 if head is None else int(head[0])
+        if head is not None:
+            factors = monomial_factors(bounds.shape[0], self.head_degree)
+            select = np.zeros((self.head_degree, bounds.shape[0], len(factors)))
+            for k, column in np.argwhere(factors.T > 0):
+                select[k, factors[column, k] - 1, column] = 1.0
+            coefficients = np.asarray(head[1], dtype=np.float64)
+            self.register_buffer("head_select", _float32(select))
+            self.register_buffer("head_offset", _float32((factors.T == 0).astype(float)))
+            self.register_buffer(
+                "head_weight", _float32(coefficients.reshape(coefficients.shape[0], -1))
+            )
+        self.has_probabilities = probability_channels is not None and bool(
+            np.any(probability_channels)
+        )
+        if self.has_probabilities:
+            selector = np.broadcast_to(
+                np.asarray(probability_channels, dtype=float), np.shape(output_offset)
+            )
+            self.register_buffer("probability_selector", _float32(selector))
 
     def scale_parameters(self, parameters: torch.Tensor) -> torch.Tensor:
         """Physical parameters → the unit box the FFNN was trained on."""
         return (parameters - self.input_low) / self.input_span
 
+    def head_part(self, unit_parameters: torch.Tensor) -> torch.Tensor:
+        """The polynomial head's contribution in physical units."""
+        features = unit_parameters @ self.head_select[0] + self.head_offset[0]
+        for k in range(1, self.head_degree):
+            features = features * (unit_parameters @ self.head_select[k] + self.head_offset[k])
+        return (features @ self.head_weight).reshape(-1, *self.output_offset.shape)
+
     def scaled_backbones(self, unit_parameters: torch.Tensor) -> torch.Tensor:
-        """Unit-box parameters → backbones in the training (scaled) space."""
+        """Unit-box parameters → the networks' output, in the training (scaled) space."""
         return self.decoder(self.regressor(unit_parameters))
 
     def forward(self, parameters: torch.Tensor) -> torch.Tensor:
-        scaled = self.scaled_backbones(self.scale_parameters(parameters))
-        return scaled * self.output_scale + self.output_offset
+        unit = self.scale_parameters(parameters)
+        physical = self.scaled_backbones(unit) * self.output_scale + self.output_offset
+        if self.head_degree:
+            physical = physical + self.head_part(unit)
+        if not self.has_probabilities:
+            return physical
+        # Elementwise select (no gather/concat): the graph stays within simple ONNX ops.
+        return physical + self.probability_selector * (torch.sigmoid(physical) - physical)
+
+
+def network_sizes(model: PhysicalSurrogate, autoencoder: Autoencoder, config: NetConfig) -> dict:
+    """Layer widths and parameter counts of a surrogate's networks (for sidecars and benches)."""
+
+    def count(module: nn.Module) -> int:
+        return int(sum(p.numel() for p in module.parameters()))
+
+    n_levels, n_channels = model.output_offset.shape
+    n_params = model.input_low.numel()
+    return {
+        "input": [int(n_levels), int(n_channels)],
+        "latent": config.latent_dim,
+        "conv_filters": list(config.conv_filters),
+        "kernel_size": config.kernel_size,
+        "dilation": config.dilation,
+        "ffnn": [int(n_params), *[config.ffnn_width] * config.ffnn_depth, config.latent_dim],
+        "head_degree": model.head_degree,
+        "parameters": {
+            "encoder": count(autoencoder.encoder),
+            "decoder": count(autoencoder.decoder),
+            "ffnn": count(model.regressor),
+            "exported": count(model),
+        },
+    }

@@ -5,8 +5,24 @@ An exported surrogate is a folder with two files::
     surrogate.onnx   one graph: physical parameters (batch, n_params), float32
                      → physical backbones (batch, n_levels, n_channels), float32
     surrogate.json   the sidecar: format, parameter names/order and training box,
-                     excitation levels, channels with units, scalers, training
-                     metrics and versions, and the SHA-256 of surrogate.onnx
+                     the grid (excitation levels or response amplitudes), channels
+                     with units, scalers, network sizes, test figures and versions,
+                     and the SHA-256 of surrogate.onnx
+
+A backbone is sampled on one of two grids (:attr:`SurrogateSpec.representation`):
+
+``"amplitude_grid"``
+    Fixed response amplitudes (m). Every parameter vector has a value there: the
+    channels are the frequency, the damping ratio and the base-acceleration
+    amplitude the backbone needs at that amplitude, plus ``has_backbone``, the
+    probability that the model has a backbone point there that a test stepping
+    its level up reaches (0 where there is no periodic solution, no positive
+    power input, or the level needed is below one already passed). Value
+    channels are meaningful only where ``has_backbone`` ≥ 0.5.
+``"excitation_levels"``
+    Fixed base-acceleration levels (m/s²), as a test steps its shaker: the
+    response amplitude is an output. Undefined for a parameter vector that
+    cannot reach a level, so such vectors are dropped from its datasets.
 
 :class:`SurrogateSpec` is the contract both files share (it is also what
 training takes); :class:`SurrogateRuntime` loads the pair, checks that they
@@ -33,19 +49,34 @@ __all__ = [
     "CHANNEL_UNITS",
     "FORMAT",
     "FORMAT_VERSION",
+    "MASK_CHANNEL",
     "MODEL_FILE",
+    "REPRESENTATION_CHANNELS",
     "SIDECAR_FILE",
     "SurrogateRuntime",
     "SurrogateSpec",
 ]
 
 FORMAT = "pm-joint/Surrogate"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 MODEL_FILE = "surrogate.onnx"
 SIDECAR_FILE = "surrogate.json"
 
 #: Backbone channels a surrogate may predict, with their (SI) units.
-CHANNEL_UNITS = {"amplitude_m": "m", "frequency_hz": "Hz", "damping_ratio": "1"}
+CHANNEL_UNITS = {
+    "amplitude_m": "m",
+    "frequency_hz": "Hz",
+    "damping_ratio": "1",
+    "base_acceleration_m_s2": "m/s^2",
+    "has_backbone": "1",
+}
+#: The mask channel of the amplitude grid: probability that a backbone point exists.
+MASK_CHANNEL = "has_backbone"
+#: Channels each representation allows (the grid's own quantity is not a channel).
+REPRESENTATION_CHANNELS = {
+    "excitation_levels": ("amplitude_m", "frequency_hz", "damping_ratio"),
+    "amplitude_grid": ("frequency_hz", "damping_ratio", "base_acceleration_m_s2", MASK_CHANNEL),
+}
 
 Extrapolate = Literal["raise", "flag", "allow"]
 _EXTRAPOLATE = ("raise", "flag", "allow")
@@ -62,18 +93,24 @@ class SurrogateSpec:
     bounds
         ``(n_params, 2)`` training box, ``[low, high]`` per parameter (SI).
     levels
-        The fixed excitation levels of every backbone, increasing.
+        The fixed excitation levels of every backbone, increasing
+        (``"excitation_levels"`` representation); None with ``amplitudes_m``.
     channels
-        Backbone channels, names from :data:`CHANNEL_UNITS`.
+        Backbone channels, names from :data:`REPRESENTATION_CHANNELS` of the
+        representation; the amplitude grid needs :data:`MASK_CHANNEL`.
     level_unit
         Unit of ``levels`` (base-acceleration amplitude by default).
+    amplitudes_m
+        The fixed response amplitudes (m) of every backbone, increasing
+        (``"amplitude_grid"`` representation); give this or ``levels``.
     """
 
     parameter_names: tuple[str, ...]
     bounds: np.ndarray
-    levels: np.ndarray
+    levels: np.ndarray | None = None
     channels: tuple[str, ...] = ("amplitude_m", "frequency_hz")
     level_unit: str = "m/s^2"
+    amplitudes_m: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.parameter_names)
@@ -87,22 +124,46 @@ class SurrogateSpec:
                 raise ValueError(
                     f"bounds of parameter {name!r} must be finite, low < high: [{low}, {high}]"
                 )
-        levels = np.array(self.levels, dtype=np.float64)
-        if levels.ndim != 1 or levels.size < 2 or not np.all(np.isfinite(levels)):
-            raise ValueError(f"levels must be a finite 1-D array of >= 2 values: {levels}")
-        if np.any(np.diff(levels) <= 0):
-            raise ValueError("levels must be strictly increasing")
+        if (self.levels is None) == (self.amplitudes_m is None):
+            raise ValueError("give either levels (m/s²) or amplitudes_m (m), not both or neither")
+        grid_name = "levels" if self.amplitudes_m is None else "amplitudes_m"
+        grid = np.array(getattr(self, grid_name), dtype=np.float64)
+        if grid.ndim != 1 or grid.size < 2 or not np.all(np.isfinite(grid)):
+            raise ValueError(f"{grid_name} must be a finite 1-D array of >= 2 values: {grid}")
+        if np.any(np.diff(grid) <= 0):
+            raise ValueError(f"{grid_name} must be strictly increasing")
+        if grid_name == "amplitudes_m" and grid[0] <= 0:
+            raise ValueError(f"amplitudes_m must be positive: {grid}")
         channels = tuple(str(c) for c in self.channels)
-        unknown = [c for c in channels if c not in CHANNEL_UNITS]
+        allowed = REPRESENTATION_CHANNELS[self.representation]
+        unknown = [c for c in channels if c not in allowed]
         if unknown or not channels or len(set(channels)) != len(channels):
             raise ValueError(
-                f"channels must be unique names from {sorted(CHANNEL_UNITS)}, got {channels}"
+                f"channels of the {self.representation} representation must be unique names "
+                f"from {list(allowed)}, got {channels}"
             )
-        bounds.flags.writeable = levels.flags.writeable = False
+        if self.representation == "amplitude_grid" and (
+            MASK_CHANNEL not in channels or len(channels) < 2
+        ):
+            raise ValueError(
+                f"an amplitude grid needs the mask channel {MASK_CHANNEL!r} and at least one "
+                f"value channel, got {channels}"
+            )
+        bounds.flags.writeable = grid.flags.writeable = False
         object.__setattr__(self, "parameter_names", names)
         object.__setattr__(self, "bounds", bounds)
-        object.__setattr__(self, "levels", levels)
+        object.__setattr__(self, grid_name, grid)
         object.__setattr__(self, "channels", channels)
+
+    @property
+    def representation(self) -> str:
+        """``"amplitude_grid"`` or ``"excitation_levels"`` (see the module docstring)."""
+        return "excitation_levels" if self.amplitudes_m is None else "amplitude_grid"
+
+    @property
+    def grid(self) -> np.ndarray:
+        """The points of every backbone: ``levels`` (m/s²) or ``amplitudes_m`` (m)."""
+        return self.levels if self.amplitudes_m is None else self.amplitudes_m
 
     @property
     def n_params(self) -> int:
@@ -110,7 +171,8 @@ class SurrogateSpec:
 
     @property
     def n_levels(self) -> int:
-        return self.levels.size
+        """Points of the grid (excitation levels, or amplitude levels of the amplitude grid)."""
+        return self.grid.size
 
     @property
     def n_channels(self) -> int:
@@ -120,6 +182,11 @@ class SurrogateSpec:
     def backbone_shape(self) -> tuple[int, int]:
         """``(n_levels, n_channels)``: one backbone."""
         return self.n_levels, self.n_channels
+
+    @property
+    def value_channels(self) -> tuple[str, ...]:
+        """The channels that carry a physical value (all but the mask)."""
+        return tuple(c for c in self.channels if c != MASK_CHANNEL)
 
     def channel_index(self, channel: str) -> int:
         """Position of ``channel`` in the last axis of a backbone array."""
@@ -181,30 +248,46 @@ class SurrogateSpec:
                 f"{what}: channel {self.channels[channel]!r} is not finite at "
                 f"level {level} of curve {row}"
             )
+        if MASK_CHANNEL in self.channels:
+            mask = array[..., self.channel_index(MASK_CHANNEL)]
+            if np.any((mask < 0) | (mask > 1)):
+                raise ValueError(f"{what}: channel {MASK_CHANNEL!r} must lie in [0, 1]")
         return array
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON form (as written in the sidecar)."""
+        grid = (
+            {"levels": self.levels.tolist(), "level_unit": self.level_unit}
+            if self.amplitudes_m is None
+            else {"amplitudes_m": self.amplitudes_m.tolist()}
+        )
         return {
+            "representation": self.representation,
             "parameter_names": list(self.parameter_names),
             "bounds": self.bounds.tolist(),
-            "levels": self.levels.tolist(),
-            "level_unit": self.level_unit,
+            **grid,
             "channels": list(self.channels),
             "channel_units": {c: CHANNEL_UNITS[c] for c in self.channels},
         }
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> SurrogateSpec:
-        """Inverse of :meth:`to_dict`."""
-        missing = [k for k in ("parameter_names", "bounds", "levels", "channels") if k not in data]
+        """Inverse of :meth:`to_dict` (a sidecar without a representation has excitation levels)."""
+        representation = data.get("representation", "excitation_levels")
+        if representation not in REPRESENTATION_CHANNELS:
+            raise ValueError(
+                f"surrogate spec: representation must be one of {list(REPRESENTATION_CHANNELS)}, "
+                f"got {representation!r}"
+            )
+        grid = "levels" if representation == "excitation_levels" else "amplitudes_m"
+        missing = [k for k in ("parameter_names", "bounds", grid, "channels") if k not in data]
         if missing:
             raise ValueError(f"surrogate spec lacks {', '.join(missing)}")
         for key in ("parameter_names", "channels"):
             if not isinstance(data[key], list | tuple):
                 raise ValueError(f"surrogate spec: {key} must be a list, got {data[key]!r}")
         arrays = {}
-        for key in ("bounds", "levels"):
+        for key in ("bounds", grid):
             try:
                 arrays[key] = np.asarray(data[key], dtype=np.float64)
             except (TypeError, ValueError):
@@ -214,9 +297,9 @@ class SurrogateSpec:
         return cls(
             parameter_names=tuple(data["parameter_names"]),
             bounds=arrays["bounds"],
-            levels=arrays["levels"],
             channels=tuple(data["channels"]),
             level_unit=data.get("level_unit", "m/s^2"),
+            **{grid: arrays[grid]},
         )
 
 
@@ -370,8 +453,14 @@ class SurrogateRuntime:
         return self.spec.bounds
 
     @property
-    def levels(self) -> np.ndarray:
+    def levels(self) -> np.ndarray | None:
+        """Excitation levels (m/s²) of an ``"excitation_levels"`` surrogate, else None."""
         return self.spec.levels
+
+    @property
+    def amplitudes_m(self) -> np.ndarray | None:
+        """Response amplitudes (m) of an ``"amplitude_grid"`` surrogate, else None."""
+        return self.spec.amplitudes_m
 
     @property
     def channels(self) -> tuple[str, ...]:
@@ -430,8 +519,15 @@ class SurrogateRuntime:
         return self.channel("amplitude_m", parameters, **options)
 
     def frequency_hz(self, parameters: Any, **options: Any) -> np.ndarray | tuple:
-        """Backbone frequency (Hz) per excitation level."""
+        """Backbone frequency (Hz) per grid point."""
         return self.channel("frequency_hz", parameters, **options)
+
+    def has_backbone(self, parameters: Any, **options: Any) -> np.ndarray | tuple:
+        """Per amplitude: True where the predicted backbone exists (mask probability ≥ 0.5)."""
+        result = self.channel(MASK_CHANNEL, parameters, **options)
+        if isinstance(result, tuple):
+            return result[0] >= 0.5, result[1]
+        return result >= 0.5
 
     def __repr__(self) -> str:
         return (

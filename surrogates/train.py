@@ -1,23 +1,42 @@
 """Training the backbone surrogate: the paper's two-stage scheme plus a joint fine-tune.
 
-1. **Autoencoder** on the scaled backbones (reconstruction MSE).
+1. **Autoencoder** on the scaled backbones (reconstruction loss).
 2. **FFNN** from the unit-box parameters to the encoder's latents (latent MSE),
    the encoder frozen.
 3. **Fine-tune** (ours, optional): FFNN + decoder end-to-end on the backbone
-   MSE, at a lower learning rate. Stage 2 only matches latents, and a small
+   loss, at a lower learning rate. Stage 2 only matches latents, and a small
    latent error can be amplified by the decoder; training the composition on
    the quantity that matters removes most of that error.
 
 Scalings: parameters are min–max scaled with the training box (the spec's
-bounds) to [0, 1]; backbones are standardised per (level, channel) by default,
-so that a 1 % error weighs the same at every excitation level, or per channel.
+bounds) to [0, 1]; what the networks learn (the backbones, or with a head its
+residual) is standardised per (level, channel) by default, so that an error of
+a given share of its spread weighs the same at every grid point, or per channel.
 Both are folded into :class:`~surrogates.nets.PhysicalSurrogate`, the module
 that is exported.
 
+Loss: a weighted mean over the entries of a batch, ``Σ w·ℓ / Σ w``, with ``ℓ``
+the squared error of a value channel, plus ``mask_weight`` times that of the
+binary cross-entropy of the amplitude grid's mask channel (a logit inside the
+network, a probability at its output). Early stopping follows what each part
+leaves of a trivial prediction (the mask by its Brier score, see
+``_BackboneLoss``). The weights (:meth:`~surrogates.dataset.BackboneDataset.loss_weights`)
+are 0 where a value is masked or was not observed, so neutral targets teach
+nothing; without weights every entry weighs 1 (plain MSE).
+
+``head_degree`` (ours, optional): a per-(level, channel) polynomial regression on
+the parameters (:class:`~surrogates.baselines.PolynomialBaseline`, 1: linear,
+3: cubic), fitted to the training rows, is part of the graph and the networks
+learn its residual, standardised by the residual's own spread; the autoencoder
+then compresses only what the regression misses, at the precision it is missed
+with.
+
 Every stage uses Adam (lr 1e-3; 1e-4 for the fine-tune; halved on plateaus),
-MSE, mini-batches of 32 (Keras' default), a validation split with early stopping
-that restores the best weights, and reports the validation Pearson coefficient per epoch (in the
-scaled space).
+mini-batches of 32 (Keras' default), a validation split with early stopping
+that restores the best weights, and reports the validation Pearson coefficient
+per epoch (in the scaled space, weighted entries of the value channels).
+:func:`train_on_dataset` takes the splits of a dataset: train, validation for
+early stopping, and an independent test split for the reported figures.
 Runs are seeded: on CPU the same seed gives the same weights; on GPU cuDNN may
 not be bitwise reproducible.
 """
@@ -27,20 +46,36 @@ from __future__ import annotations
 import copy
 import math
 import time
-from collections.abc import Callable
+import warnings
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 import torch
+from numpy.typing import ArrayLike
 from torch import nn
 from tqdm.auto import tqdm
 
-from surrogates.evaluate import backbone_metrics
-from surrogates.nets import Autoencoder, LatentRegressor, NetConfig, PhysicalSurrogate
-from surrogates.runtime import SurrogateSpec
+from surrogates.baselines import PolynomialBaseline
+from surrogates.dataset import MEASURED_PREFIX, BackboneDataset
+from surrogates.evaluate import accuracy_report, backbone_metrics, channel_errors
+from surrogates.nets import (
+    Autoencoder,
+    LatentRegressor,
+    NetConfig,
+    PhysicalSurrogate,
+    network_sizes,
+)
+from surrogates.runtime import MASK_CHANNEL, SurrogateSpec
 
-__all__ = ["Surrogate", "TrainingConfig", "output_scaling", "train_surrogate"]
+__all__ = [
+    "Surrogate",
+    "TrainingConfig",
+    "output_scaling",
+    "train_on_dataset",
+    "train_surrogate",
+]
 
 
 @dataclass(frozen=True)
@@ -56,6 +91,15 @@ class TrainingConfig:
     trc-like benchmark (``bench/surrogate.py``) as 3000 constant-rate epochs per
     stage with early stopping, in about a quarter of the time. ``threads`` sets
     torch's CPU threads for the training (None: leave torch's setting).
+    ``head_degree`` (0: none, the paper's) adds a per-(level, channel) polynomial
+    regression of that degree to the graph and trains the networks on its
+    residual (see the module docstring).
+    ``validation_fraction`` applies when no validation rows are given.
+    ``mask_weight`` scales the mask's cross-entropy against the value channels'
+    squared error (in the scaled space) in the training loss. Measured on the
+    test box of ``tests/test_surrogate_grid.py`` (cubic head, 320 curves): with 1
+    the mask agreed with the harmonic balance's no better than a linear
+    probability (0.975 on test); with 4, 0.991.
     """
 
     net: NetConfig = field(default_factory=NetConfig)
@@ -69,6 +113,8 @@ class TrainingConfig:
     lr_decay_factor: float = 0.5
     validation_fraction: float = 0.2
     output_scaling: Literal["level", "channel"] = "level"
+    head_degree: int = 0
+    mask_weight: float = 4.0
     seed: int = 0
     device: str | None = None
     threads: int | None = 1
@@ -85,6 +131,10 @@ class TrainingConfig:
             raise ValueError(
                 f"lr_decay_factor must be in (0, 1) and lr_decay_patience >= 0: {self}"
             )
+        if not (math.isfinite(self.mask_weight) and self.mask_weight >= 0):
+            raise ValueError(f"mask_weight must be finite and ≥ 0: {self.mask_weight}")
+        if self.head_degree not in (0, 1, 2, 3):
+            raise ValueError(f"head_degree must be 0 (none), 1, 2 or 3: {self.head_degree}")
         if min(self.max_epochs, self.patience, self.batch_size) < 1 or self.finetune_epochs < 0:
             raise ValueError(f"epochs, patience and batch size must be positive: {self}")
 
@@ -103,7 +153,7 @@ class Surrogate:
     Attributes
     ----------
     spec
-        Parameters, box, levels and channels.
+        Parameters, box, grid and channels.
     model
         Physical parameters → physical backbones (on CPU, eval mode).
     autoencoder
@@ -114,11 +164,22 @@ class Surrogate:
         Per stage, one record per epoch: ``epoch``, ``loss``, ``val_loss``,
         ``val_pearson``, ``learning_rate``.
     metrics
-        :func:`~surrogates.evaluate.backbone_metrics` on the validation split.
+        Errors on the validation split (the one that stopped training early:
+        not an independent figure): :func:`~surrogates.evaluate.backbone_metrics`
+        on excitation levels, :func:`~surrogates.evaluate.channel_errors` on the
+        amplitude grid.
     n_train, n_validation
         Curves used to fit and to stop early.
     train_seconds
         Wall time of the whole training.
+    data
+        Where the curves came from (:func:`train_on_dataset`): the dataset's
+        hash, its counts per origin and split, and the measured curves that were
+        training or validation data (``measured_in_training``); empty when
+        trained on bare arrays.
+    test_report
+        :func:`~surrogates.evaluate.accuracy_report` on the dataset's test split
+        (:func:`train_on_dataset`), or None.
     """
 
     spec: SurrogateSpec
@@ -130,6 +191,8 @@ class Surrogate:
     n_train: int
     n_validation: int
     train_seconds: float
+    data: dict[str, Any] = field(default_factory=dict)
+    test_report: dict[str, Any] | None = None
 
     def predict(self, parameters: Any) -> np.ndarray:
         """Backbones ``(n, n_levels, n_channels)`` for physical ``(n, n_params)`` parameters."""
@@ -155,27 +218,42 @@ class Surrogate:
         """``(n_levels, n_channels)`` scale of the output scaling."""
         return self.model.output_scale.numpy().astype(np.float64)
 
+    @property
+    def sizes(self) -> dict[str, Any]:
+        """Layer widths and parameter counts (:func:`~surrogates.nets.network_sizes`)."""
+        return network_sizes(self.model, self.autoencoder, self.config.net)
+
 
 def output_scaling(
-    backbones: np.ndarray, mode: Literal["level", "channel"] = "level"
+    backbones: np.ndarray,
+    mode: Literal["level", "channel"] = "level",
+    weights: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Offset and scale, each ``(n_levels, n_channels)``, that standardise backbones.
 
     ``"level"`` standardises every (level, channel) over the curves, ``"channel"``
-    every channel over curves and levels. A spread of zero (a constant entry)
-    falls back to the channel's spread, then to 1, so the scaling stays invertible.
+    every channel over curves and levels, each over the entries with weight > 0
+    (all without ``weights``). A spread of zero (a constant entry) or an entry
+    without weighted values falls back to the channel's, then to 1, so the
+    scaling stays invertible.
     """
-    if mode == "level":
-        offset, scale = backbones.mean(axis=0), backbones.std(axis=0)
-    elif mode == "channel":
-        offset = np.broadcast_to(backbones.mean(axis=(0, 1)), backbones.shape[1:]).copy()
-        scale = np.broadcast_to(backbones.std(axis=(0, 1)), backbones.shape[1:]).copy()
-    else:
+    if mode not in ("level", "channel"):
         raise ValueError(f"output scaling must be 'level' or 'channel', got {mode!r}")
-    channel_scale = backbones.std(axis=(0, 1))
+    used = np.ones(backbones.shape, bool) if weights is None else np.asarray(weights) > 0
+    values = np.where(used, backbones, np.nan)
+    with warnings.catch_warnings():  # all-NaN slices are the fallback's business
+        warnings.simplefilter("ignore", RuntimeWarning)
+        channel_offset = np.nan_to_num(np.nanmean(values, axis=(0, 1)))
+        channel_scale = np.nanstd(values, axis=(0, 1))
+        if mode == "level":
+            offset, scale = np.nanmean(values, axis=0), np.nanstd(values, axis=0)
+        else:
+            offset = np.broadcast_to(channel_offset, backbones.shape[1:]).copy()
+            scale = np.broadcast_to(channel_scale, backbones.shape[1:]).copy()
     fallback = np.where(channel_scale > 0, channel_scale, 1.0)
     tiny = 1e-9 * fallback
-    return offset, np.where(scale > tiny, scale, fallback)
+    offset = np.where(np.isfinite(offset), offset, channel_offset)
+    return offset, np.where(np.isfinite(scale) & (scale > tiny), scale, fallback)
 
 
 def train_surrogate(
@@ -183,19 +261,30 @@ def train_surrogate(
     backbones: np.ndarray,
     spec: SurrogateSpec,
     config: TrainingConfig | None = None,
+    *,
+    weights: np.ndarray | None = None,
+    validation_index: np.ndarray | None = None,
 ) -> Surrogate:
-    """Train a backbone surrogate on a dataset of curves.
+    """Train a backbone surrogate on curves.
 
     Parameters
     ----------
     parameters
         ``(n, n_params)`` physical parameters, inside ``spec.bounds``.
     backbones
-        ``(n, n_levels, n_channels)`` backbones on ``spec.levels``, SI units.
+        ``(n, n_levels, n_channels)`` backbones on ``spec.grid``, SI units.
     spec
-        Names, box, levels and channels of the dataset.
+        Names, box, grid and channels of the data.
     config
         Training options; :class:`TrainingConfig` defaults when None.
+    weights
+        ``(n, n_levels, n_channels)`` loss weight of every entry (0: not a
+        target; :meth:`~surrogates.dataset.BackboneDataset.loss_weights`); None:
+        all 1. Masked value entries also enter the autoencoder as the neutral
+        scaled value 0.
+    validation_index
+        Rows that stop training early (never fitted); None: a seeded
+        ``config.validation_fraction`` of the rows.
 
     Returns
     -------
@@ -208,8 +297,20 @@ def train_surrogate(
     if x.shape[0] != y.shape[0]:
         raise ValueError(f"{x.shape[0]} parameter vectors but {y.shape[0]} backbones")
     spec.require_in_box(x, "training parameters", hint="; widen the spec's bounds")
-    n_validation = max(1, round(config.validation_fraction * len(x)))
-    if len(x) - n_validation < 2:
+    w = np.ones(y.shape) if weights is None else np.asarray(weights, dtype=float)
+    if w.shape != y.shape or not np.all(np.isfinite(w) & (w >= 0)):
+        raise ValueError(f"weights must be finite, ≥ 0 and shaped {y.shape}, got {w.shape}")
+    rng = np.random.default_rng(config.seed)
+    if validation_index is None:
+        n_validation = max(1, round(config.validation_fraction * len(x)))
+        order = rng.permutation(len(x))
+        valid, train = order[:n_validation], order[n_validation:]
+    else:
+        valid = np.unique(np.asarray(validation_index, dtype=int))
+        if valid.size == 0 or valid.min() < 0 or valid.max() >= len(x):
+            raise ValueError(f"validation_index must name rows of the {len(x)} curves")
+        train = rng.permutation(np.setdiff1d(np.arange(len(x)), valid))
+    if train.size < 2:
         raise ValueError(f"{len(x)} curves are too few to train and validate on")
     device = torch.device(config.device or ("cuda" if torch.cuda.is_available() else "cpu"))
     if config.threads is not None:
@@ -218,31 +319,47 @@ def train_surrogate(
         torch.set_num_threads(config.threads)
     start = time.perf_counter()
 
-    rng = np.random.default_rng(config.seed)
-    order = rng.permutation(len(x))
-    valid, train = order[:n_validation], order[n_validation:]
-    offset, scale = output_scaling(y[train], config.output_scaling)
+    probability = np.array([c == MASK_CHANNEL for c in spec.channels])
+    head = None
+    if config.head_degree:
+        regression = PolynomialBaseline.fit(spec, x[train], y[train], w[train], config.head_degree)
+        regression.coefficients[..., probability] = 0.0  # the mask stays the network's alone
+        head = (config.head_degree, regression.coefficients)
+    # What the networks learn, standardised: the curves, or the head's residual (taken
+    # in float64 here: in the network's float32 it would cancel).
+    learnt = y if head is None else y - regression.predict(x)
+    offset, scale = output_scaling(learnt[train], config.output_scaling, w[train])
+    offset[:, probability], scale[:, probability] = 0.0, 1.0  # the mask: a logit, as it is
+    neutral = np.zeros(y.shape, bool)
+    if probability.any():
+        neutral[..., ~probability] = (y[..., probability] < 0.5).any(axis=-1, keepdims=True)
+    scaled = np.where(neutral, 0.0, (learnt - offset) / scale)
+    unit = (x - spec.bounds[:, 0]) / np.ptp(spec.bounds, axis=1)
 
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
         autoencoder = Autoencoder(spec.n_levels, spec.n_channels, config.net)
         regressor = LatentRegressor(spec.n_params, config.net)
-    model = PhysicalSurrogate(regressor, autoencoder.decoder, spec.bounds, offset, scale)
+    model = PhysicalSurrogate(
+        regressor, autoencoder.decoder, spec.bounds, offset, scale,
+        head=head, probability_channels=probability,
+    )  # fmt: skip
     model.to(device)
     autoencoder.to(device)
 
-    unit_x = torch.as_tensor(
-        (x - spec.bounds[:, 0]) / np.ptp(spec.bounds, axis=1), dtype=torch.float32, device=device
-    )
-    scaled_y = torch.as_tensor((y - offset) / scale, dtype=torch.float32, device=device)
+    unit_x = torch.as_tensor(unit, dtype=torch.float32, device=device)
+    scaled_y = torch.as_tensor(scaled, dtype=torch.float32, device=device)
+    loss_weights = torch.as_tensor(w, dtype=torch.float32, device=device)
     shuffle = torch.Generator().manual_seed(config.seed)
     stage = _StageRunner(config, shuffle, train, valid)
+    loss = _BackboneLoss(torch.as_tensor(probability, device=device), config.mask_weight)
 
     history = {
         "autoencoder": stage.run(
-            "autoencoder", autoencoder, scaled_y, scaled_y, config.learning_rate, config.max_epochs
+            "autoencoder", autoencoder, scaled_y, scaled_y, config.learning_rate,
+            config.max_epochs, loss=loss, weights=loss_weights,
         )
-    }
+    }  # fmt: skip
     with torch.no_grad():
         autoencoder.eval()
         latents = autoencoder.encoder(scaled_y)
@@ -251,23 +368,116 @@ def train_surrogate(
     )
     if config.finetune_epochs:
         history["finetune"] = stage.run(
-            "finetune",
-            model,
-            unit_x,
-            scaled_y,
-            config.finetune_learning_rate,
+            "finetune", model, unit_x, scaled_y, config.finetune_learning_rate,
             config.finetune_epochs,
             forward=model.scaled_backbones,  # FFNN + decoder, in the scaled space
-        )
+            loss=loss, weights=loss_weights,
+        )  # fmt: skip
 
     model.cpu().eval()
     autoencoder.cpu().eval()
     surrogate = Surrogate(
-        spec, model, autoencoder, config, history, {}, len(train), n_validation, 0.0
+        spec, model, autoencoder, config, history, {}, len(train), len(valid), 0.0
     )
-    surrogate.metrics = backbone_metrics(surrogate.predict(x[valid]), y[valid], spec)
+    predicted = surrogate.predict(x[valid])
+    surrogate.metrics = (
+        backbone_metrics(predicted, y[valid], spec)
+        if spec.representation == "excitation_levels"
+        else channel_errors(predicted, y[valid], w[valid], spec)
+    )
     surrogate.train_seconds = time.perf_counter() - start
     return surrogate
+
+
+def train_on_dataset(
+    dataset: BackboneDataset,
+    config: TrainingConfig | None = None,
+    *,
+    scatter: Mapping[str, ArrayLike] | None = None,
+) -> Surrogate:
+    """Train on a dataset's splits: fit on train, stop early on validation, report on test.
+
+    The dataset needs its splits (:meth:`~surrogates.dataset.BackboneDataset.with_splits`);
+    the loss weights are its :meth:`~surrogates.dataset.BackboneDataset.loss_weights`.
+    The returned surrogate carries :func:`~surrogates.evaluate.accuracy_report` on
+    the test split (with ``scatter``, the assembly standard deviation per grid
+    point and channel, for the ratios to it) and, in ``data``, the counts and the
+    measured curves that were training or validation data.
+    """
+    train, valid = dataset.in_split("train"), dataset.in_split("validation")
+    if dataset.in_split("test").size == 0:
+        raise ValueError("the dataset's test split is empty: no independent figure possible")
+    rows = np.concatenate([train, valid])
+    surrogate = train_surrogate(
+        dataset.X[rows], dataset.Y[rows], dataset.spec, config,
+        weights=dataset.loss_weights()[rows],
+        validation_index=np.arange(train.size, rows.size),
+    )  # fmt: skip
+    measured = dataset.is_measured
+    surrogate.data = {
+        "dataset_sha256": dataset.content_hash,
+        "counts": dataset.provenance.get("counts", {}),
+        "splits": dataset.split_counts(),
+        "measured_in_training": [
+            str(o).removeprefix(MEASURED_PREFIX) for o in dataset.origin[rows][measured[rows]]
+        ],
+        "measured_in_test": [
+            str(o).removeprefix(MEASURED_PREFIX)
+            for o in dataset.origin[measured & (dataset.partition == "test")]
+        ],
+        "measured_excluded": dataset.provenance.get("measured", {}).get("excluded", {}),
+    }
+    surrogate.test_report = accuracy_report(dataset, surrogate.predict, scatter=scatter)
+    return surrogate
+
+
+class _BackboneLoss:
+    """Squared error on value channels plus ``mask_weight`` × BCE on probability channels.
+
+    Each part is a weighted mean over its own entries, ``Σ w·ℓ / Σ w``. Early
+    stopping and the learning-rate schedule follow :meth:`monitor`, which adds
+    each part's share of what a trivial prediction leaves: the value part over
+    the targets' mean square, the mask's Brier score (bounded, unlike the
+    cross-entropy of a sharp no-backbone boundary, which keeps rising with the
+    logits' confidence while the agreement holds) over the prevalence's ``q(1 − q)``.
+    """
+
+    def __init__(self, probability: torch.Tensor, mask_weight: float = 1.0) -> None:
+        self.probability, self.mask_weight = probability, mask_weight
+
+    def _values(self, predicted, target, weights) -> torch.Tensor:
+        value = ~self.probability
+        w = weights[..., value]
+        squared = (predicted[..., value] - target[..., value]) ** 2
+        return (w * squared).sum() / w.sum().clamp_min(1e-12)
+
+    def __call__(
+        self, predicted: torch.Tensor, target: torch.Tensor, weights: torch.Tensor
+    ) -> torch.Tensor:
+        values = self._values(predicted, target, weights)
+        if not self.probability.any():
+            return values
+        w = weights[..., self.probability]
+        bce = nn.functional.binary_cross_entropy_with_logits(
+            predicted[..., self.probability], target[..., self.probability].clamp(0.0, 1.0),
+            reduction="none",
+        )  # fmt: skip
+        return values + self.mask_weight * (w * bce).sum() / w.sum().clamp_min(1e-12)
+
+    def monitor(
+        self, predicted: torch.Tensor, target: torch.Tensor, weights: torch.Tensor
+    ) -> torch.Tensor:
+        """Unexplained shares of the value and mask parts, summed (what early stopping follows)."""
+        trivial = self._values(torch.zeros_like(target), target, weights).clamp_min(1e-12)
+        score = self._values(predicted, target, weights) / trivial
+        if not self.probability.any():
+            return score
+        w = weights[..., self.probability]
+        truth = target[..., self.probability].clamp(0.0, 1.0)
+        brier = (w * (torch.sigmoid(predicted[..., self.probability]) - truth) ** 2).sum()
+        prevalence = (w * truth).sum() / w.sum().clamp_min(1e-12)
+        spread = (prevalence * (1 - prevalence)).clamp_min(1e-2)
+        return score + brier / w.sum().clamp_min(1e-12) / spread
 
 
 @dataclass
@@ -288,13 +498,28 @@ class _StageRunner:
         learning_rate: float,
         max_epochs: int,
         forward: Callable[[torch.Tensor], torch.Tensor] | None = None,
+        loss: Callable[..., torch.Tensor] | None = None,
+        weights: torch.Tensor | None = None,
     ) -> list[dict[str, float]]:
-        """Train ``module``'s parameters on ``forward(inputs) ≈ targets`` (forward: the module)."""
+        """Train ``module``'s parameters on ``forward(inputs) ≈ targets`` (forward: the module).
+
+        ``loss(predicted, target, weights)`` with ``weights`` shaped like the
+        targets; default the mean squared error.
+        """
         forward = forward or module
         device = inputs.device
+        if weights is None:
+            weights = torch.ones_like(targets)
+        loss_fn = loss or (lambda p, t, w: nn.functional.mse_loss(p, t))
+        monitor = loss.monitor if isinstance(loss, _BackboneLoss) else loss_fn
         train = torch.as_tensor(self.train, device=device)
-        x_valid = inputs[torch.as_tensor(self.valid, device=device)]
-        y_valid = targets[torch.as_tensor(self.valid, device=device)]
+        valid = torch.as_tensor(self.valid, device=device)
+        x_valid, y_valid, w_valid = inputs[valid], targets[valid], weights[valid]
+        value = (
+            ~loss.probability
+            if isinstance(loss, _BackboneLoss)
+            else torch.ones(targets.shape[-1], dtype=torch.bool, device=device)
+        )
         optimizer = torch.optim.Adam(module.parameters(), lr=learning_rate)
         scheduler = None
         if self.config.lr_decay_patience is not None:
@@ -304,7 +529,6 @@ class _StageRunner:
                 patience=self.config.lr_decay_patience,
                 min_lr=1e-2 * learning_rate,
             )
-        loss_fn = nn.functional.mse_loss
         best_loss, best_state, since_best = math.inf, None, 0
         history: list[dict[str, float]] = []
         bar = tqdm(range(max_epochs), desc=name, disable=not self.config.progress, leave=False)
@@ -314,15 +538,16 @@ class _StageRunner:
             total = 0.0
             for batch in permutation.split(self.config.batch_size):
                 optimizer.zero_grad(set_to_none=True)
-                loss = loss_fn(forward(inputs[batch]), targets[batch])
-                loss.backward()
+                batch_loss = loss_fn(forward(inputs[batch]), targets[batch], weights[batch])
+                batch_loss.backward()
                 optimizer.step()
-                total += loss.item() * batch.numel()
+                total += batch_loss.item() * batch.numel()
             module.eval()
             with torch.no_grad():
                 predicted = forward(x_valid)
-                val_loss = loss_fn(predicted, y_valid).item()
-                val_pearson = _pearson(predicted, y_valid)
+                val_loss = monitor(predicted, y_valid, w_valid).item()
+                used = (w_valid > 0) & value if predicted.ndim == 3 else w_valid > 0
+                val_pearson = _pearson(predicted[used], y_valid[used])
             record = {
                 "epoch": epoch,
                 "loss": total / train.numel(),

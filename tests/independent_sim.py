@@ -85,3 +85,27 @@ def forced_steady_state(
         "velocity_m_s": v,
         "excitation": np.array([excitation(ti) for ti in t]),
     }
+
+
+def hilbert_backbone(
+    time_s: np.ndarray, displacement_m: np.ndarray, band_hz: tuple[float, float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The field's model-free backbone of a free decay: the Hilbert transform of its fundamental.
+
+    The fundamental is band-passed (4th-order Butterworth, zero phase), its analytic signal
+    (:func:`scipy.signal.hilbert`) gives the instantaneous amplitude and frequency, both averaged
+    over a period; ten periods at each end (the filter's and the transform's end effects) are
+    dropped. Returns the amplitude (m) and frequency (Hz), in time order.
+    """
+    from scipy import signal
+
+    fs_hz = (time_s.size - 1) / (time_s[-1] - time_s[0])
+    sos = signal.butter(4, band_hz, btype="bandpass", fs=fs_hz, output="sos")
+    analytic = signal.hilbert(signal.sosfiltfilt(sos, displacement_m))
+    frequency = np.gradient(np.unwrap(np.angle(analytic)), time_s) / (2 * np.pi)
+    period = round(fs_hz / np.median(frequency))
+    kernel = np.ones(period) / period
+    amplitude = np.convolve(np.abs(analytic), kernel, mode="same")
+    frequency = np.convolve(frequency, kernel, mode="same")
+    inside = slice(10 * period, -10 * period)
+    return amplitude[inside], frequency[inside]

@@ -80,3 +80,21 @@ def scattered_duffing_population(
     scales = 1 + stiffness_spread * draws[:, 0]
     cubics = 1e10 * (1 + cubic_spread * draws[:, 1])
     return duffing_population(scales, cubics, amplitudes_m)
+
+
+def measured_curve(
+    hb, rng: np.random.Generator, noise_hz: float, noise_zeta: float, label: str
+) -> Backbone:
+    """A model backbone as a test would measure it: Gaussian noise on frequency and damping.
+
+    ``hb`` is a harmonic-balance result (``amplitude_m``, ``frequency_hz``, ``damping_ratio``);
+    the caller's ``rng`` draws the frequency noise, then the damping noise, so a caller that
+    also draws assembly scatter from it keeps its own order of draws.
+    """
+    n = np.size(hb.amplitude_m)
+    return Backbone(
+        hb.amplitude_m,
+        hb.frequency_hz + noise_hz * rng.standard_normal(n),
+        hb.damping_ratio + noise_zeta * rng.standard_normal(n),
+        label=label,
+    )

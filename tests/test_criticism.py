@@ -1,5 +1,6 @@
-"""Model criticism: locating failures, ranking missing effects, the add loop, reports,
-posterior bands, and the hidden-effect studies on the virtual rig."""
+"""Model criticism: the calibrated decision, locating failures, ranking missing effects,
+adequacy and admissibility, groups, the add loop, reports, posterior bands, and the
+hidden-effect studies on the virtual rig."""
 
 import json
 from functools import cache
@@ -7,15 +8,20 @@ from functools import cache
 import numpy as np
 import pytest
 import xarray as xr
+from oscillators import measured_curve
 
 from identification.analytical.harmonic import backbone as harmonic_backbone
 from identification.criticism.criticism import criticize
 from identification.criticism.plots import plot_history
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
-from identification.rig import HIDDEN_EFFECT_SCENARIOS
+from identification.rig import (
+    HIDDEN_EFFECT_SCENARIOS,
+    LAB_NULL_SCENARIOS,
+    LAB_OUT_OF_CATALOGUE_SCENARIOS,
+)
 from pm_joint.analysis.posterior import criticize as criticize_posterior
-from pm_joint.studies import KEY_CHANNEL, hidden_effect_study
+from pm_joint.studies import KEY_CHANNEL, criticism_study
 
 W0 = 2 * np.pi * 101.0
 K0 = W0**2
@@ -36,14 +42,7 @@ def population(truth: JointModel, n=3, k_spread=0.005, noise_hz=0.003, noise_zet
     for i in range(n):
         model = truth.replace(linear_stiffness=K0 * np.exp(k_spread * rng.standard_normal()))
         hb = harmonic_backbone(model, AMPS)
-        curves.append(
-            Backbone(
-                hb.amplitude_m,
-                hb.frequency_hz + noise_hz * rng.standard_normal(AMPS.size),
-                hb.damping_ratio + noise_zeta * rng.standard_normal(AMPS.size),
-                label=f"assembly{i}",
-            )
-        )
+        curves.append(measured_curve(hb, rng, noise_hz, noise_zeta, f"assembly{i}"))
     return BackboneSet(curves)
 
 
@@ -58,44 +57,47 @@ def linear_criticised(duffing_data):
 
 
 def test_where_locates_the_missing_hardening(linear_criticised):
-    """A linear model at the truth's small-amplitude stiffness misses the cubic shift
-    √(k + ¾k₃a²)/2π − √k/2π, under-predicting the frequency at large amplitude."""
+    """A refitted linear model has one frequency at every level; the measured mean follows
+    the cubic shift √(k + ¾k₃a²)/2π, so the residual, less its value at the first level,
+    is that closed-form shift less its own; the top levels are under-predicted beyond the
+    calibrated bound."""
     crit = linear_criticised
     levels = crit.data.levels_m
     shift = (np.sqrt(K0 + 0.75 * 1.4e10 * levels**2) - W0) / (2 * np.pi)
     residual, se = crit.residual("frequency_hz")
-    # plus the mean assembly offset (which scales a little with the stiffness drawn)
-    np.testing.assert_allclose(residual, shift + residual[0], rtol=0.01, atol=0.01)
-    failures = {f.channel: f for f in crit.where()}
-    failure = failures["frequency_hz"]
-    assert failure.direction == "under-predicted"
-    # ζ = c/(2ω) falls as the frequency rises: a damping failure, if any, is over-predicted
-    assert failures.get("damping_ratio", failure).direction in ("over-predicted", failure.direction)
-    assert len(failures) == len(crit.where())  # one range per channel
-    assert failure.to_mm == pytest.approx(1e3 * levels[-1])
-    assert failure.max_residual == pytest.approx(shift[-1] + residual[0], rel=0.01)
-    clearly = 1e3 * levels[shift > 4 * se + abs(residual[0])]
-    assert failure.from_mm <= clearly.min()
-    assert failure.text.startswith("frequency is under-predicted by up to")
-    assert "between" in failure.text and "mm" in failure.text
+    np.testing.assert_allclose(residual - residual[0], shift - shift[0], rtol=0.01, atol=0.01)
+    failures = [f for f in crit.where() if f.channel == "frequency_hz"]
+    top = failures[-1]
+    assert top.direction == "under-predicted"
+    assert top.to_mm == pytest.approx(1e3 * levels[-1])
+    assert top.max_residual == pytest.approx(residual[-1], rel=1e-9)
+    assert top.max_z > crit.calibration.where_bound
+    # every level beyond the bound is in a reported range, and no other
+    z = np.abs(residual) / se
+    assert z[-1] > crit.calibration.where_bound
+    assert top.text.startswith("frequency is under-predicted by up to")
 
 
 def test_missing_hardening_is_ranked_first_and_the_loop_closes(linear_criticised, duffing_data):
     crit = linear_criticised
-    assert crit.significant
+    assert crit.significant and crit.verdict == "explained"
     best = crit.missing()[0]
-    assert best.effect == "cubic_stiffness"
+    assert best.effect == "cubic_stiffness" and best.status == "explained"
     assert best.fit.model.coefficient("cubic_stiffness") == pytest.approx(1.4e10, rel=0.02)
     assert best.error_reduction["frequency_hz"] > 0.95
-    assert best.delta_ic < -100 and "hardening" in best.reading
+    assert best.gain > crit.threshold and best.delta_chi2 > 100 * crit.threshold
+    assert best.share > 0.95 and best.adequate and not best.problems
+    assert "hardening" in best.reading and "consistent with" in best.reading
     # the signature of the right effect follows the refitted model's residual
-    residual, _ = best.base.level_residual()
+    residual = crit.data.mean_residual(best.base.predicted)
     np.testing.assert_allclose(best.signature["frequency_hz"], residual[:, 0], atol=0.03)
     after = crit.add("cubic_stiffness")
     assert [s.action for s in after.history] == ["start", "+ cubic_stiffness"]
     assert after.history[1].frequency_rmse_hz < 0.05 * after.history[0].frequency_rmse_hz
-    assert not after.significant and after.where() == []
-    assert "missing: nothing significant" in after.summary()
+    assert not after.significant and after.where() == [] and after.verdict == "nothing missing"
+    assert "missing: nothing proposed" in after.summary()
+    assert [r["verdict"] for r in after.rounds] == ["explained", "nothing missing"]
+    assert after.rounds[0]["ranking"][0]["effect"] == "cubic_stiffness"
     # the history carries over to a criticism started by hand
     again = criticize(after.model.replace(cubic_stiffness=1.3e10), duffing_data,
                       history=after.history)  # fmt: skip
@@ -104,9 +106,12 @@ def test_missing_hardening_is_ranked_first_and_the_loop_closes(linear_criticised
 
 def test_the_well_specified_model_lacks_nothing(duffing_data):
     crit = criticize(linear(cubic_stiffness=1.4e10), duffing_data)
-    assert not crit.significant and crit.missing() == []
-    assert all(c.delta_ic > crit.threshold for c in crit.candidates)
+    assert not crit.significant and crit.missing() == [] and crit.verdict == "nothing missing"
+    assert all(c.gain <= crit.threshold for c in crit.candidates)
     assert len(crit.candidates) == 13  # every other catalogue effect was tried
+    assert crit.explained_share is None and not crit.unexplained
+    text = crit.summary()
+    assert f"α = {crit.alpha:g}" in text and f"{crit.n_bootstrap} bootstrap" in text
 
 
 @pytest.mark.parametrize(
@@ -123,7 +128,7 @@ def test_damping_effects_are_found_and_read(effect, coefficient, words):
     best = crit.missing()[0]
     assert best.effect == effect
     assert words in best.reading
-    assert best.error_reduction["damping_ratio"] > 0.9
+    assert best.error_reduction["damping_ratio"] > 0.9 and best.status == "explained"
     assert any(f.channel == "damping_ratio" for f in crit.where())
     if effect == "coulomb_friction":
         # Stribeck's law fitted to Coulomb data must let its decay velocity grow past
@@ -131,9 +136,29 @@ def test_damping_effects_are_found_and_read(effect, coefficient, words):
         stribeck = crit.add("stribeck_friction", v_s=0.3)
         peak_velocity = AMPS.max() * W0
         assert stribeck.model["stribeck_friction"].shape["v_s"] > 3 * peak_velocity
-        assert stribeck.fit.damping_rmse < 0.1 * crit.fit.damping_rmse
+        assert stribeck.fit.damping_rmse < 0.1 * crit.base.damping_rmse
         with pytest.raises(ValueError, match="no shape parameter"):
             crit.add("stribeck_friction", x_s=1.0)
+
+
+def test_effects_the_data_cannot_separate_form_a_group():
+    """Stribeck's law with its decay velocity far above every velocity of the test is
+    Coulomb's: both explain Coulomb data equally, so they form a group (a ranking inside
+    it is not a finding) and the report says that nothing near this test separates them;
+    ẋ² is not in it (it cancels the viscous term: inadmissible)."""
+    data = population(linear(coulomb_friction=0.2), noise_zeta=2e-6, seed=1)
+    candidates = ["coulomb_friction", "stribeck_friction", "quadratic_damping"]
+    crit = criticize(linear(), data, n_bootstrap=500, candidates=candidates)
+    assert crit.verdict == "explained"
+    (group,) = crit.groups
+    assert set(group.effects) == {"coulomb_friction", "stribeck_friction"}
+    assert max(group.separation.values()) < 6.63  # χ²₁ at 1 %: no evidence between them
+    assert group.separated_by.startswith("nothing near this test")
+    assert "a ranking among them is not a finding" in crit.summary()
+    assert "1 ambiguity group" in crit.summary()
+    quadratic = next(c for c in crit.candidates if c.effect == "quadratic_damping")
+    assert not quadratic.proposed and quadratic.problems
+    assert "terms cancel in the equivalent damping" in quadratic.problems[0]
 
 
 def test_add_refuses_what_it_cannot_add(duffing_data):
@@ -194,16 +219,23 @@ def test_report_json_and_figures(linear_criticised, tmp_path):
     paths = first.write(tmp_path / "report")
     report = json.loads(paths["json"].read_text())
     for key in ("ranking", "significant", "fails_at", "frequency_rmse_hz", "damping_rmse",
-                "history", "candidates", "comparison"):  # fmt: skip
+                "history", "candidates", "comparison", "groups", "explained_share",
+                "unexplained", "threshold", "alpha", "n_bootstrap", "verdict", "rounds",
+                "reference"):  # fmt: skip
         assert key in report, key
     top = report["ranking"][0]
     assert top["effect"] == "cubic_stiffness"
     assert set(top) >= {"effect", "error_reduction", "delta_information_criterion", "reading"}
     assert report["significant"] is True and report["fails_at"][0]["channel"] == "frequency_hz"
-    for name in ("comparison", "signatures", "history"):
+    assert report["verdict"] == "explained" and report["unexplained"] is False
+    assert report["alpha"] == 0.01 and report["n_bootstrap"] == 2000
+    assert report["threshold"] == pytest.approx(first.threshold)
+    assert len(report["reference"]["k_eq_reference"]) == len(report["amplitude_mm"])
+    for name in ("comparison", "signatures", "freeform", "history"):
         assert paths[name].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    second = crit.write(tmp_path / "after")
-    assert len(json.loads(second["json"].read_text())["history"]) == 2
+    second = json.loads(crit.write(tmp_path / "after")["json"].read_text())
+    assert len(second["history"]) == 2
+    assert [r["verdict"] for r in second["rounds"]] == ["explained", "nothing missing"]
     from matplotlib.figure import Figure
 
     ax = Figure().subplots()
@@ -213,7 +245,9 @@ def test_report_json_and_figures(linear_criticised, tmp_path):
 
 def test_posterior_band_covers_its_population():
     """Curves drawn from the posterior's own population fall inside its 95 % band;
-    a posterior without the hardening does not cover the large amplitudes."""
+    a posterior without the hardening does not cover the large amplitudes. The
+    covariance is widened by the uncertainty of the population-mean curve (the draws'
+    spread over the number of curves), not by the predictive spread."""
     truth = linear(cubic_stiffness=1.4e10)
     data = population(truth, n=8, k_spread=0.003, noise_hz=0.0, seed=5)
     rng = np.random.default_rng(6)
@@ -226,6 +260,14 @@ def test_posterior_band_covers_its_population():
     coverage = crit.comparison["frequency_hz"]["coverage"]
     assert coverage.mean() > 0.8
     assert not any(f.channel == "frequency_hz" for f in crit.where())
+    # the widening: the variance of the posterior's mean prediction over the 8 curves
+    plain = criticize(truth, data)
+    spread = np.var([harmonic_backbone(truth.with_parameters(dict(zip(names, d, strict=True))),
+                                       crit.data.levels_m).frequency_hz for d in draws[::4]],
+                    axis=0, ddof=1)  # fmt: skip
+    added = crit.residual("frequency_hz")[1] ** 2 - plain.residual("frequency_hz")[1] ** 2
+    np.testing.assert_allclose(added, spread / 8, rtol=0.3)
+    assert (added < 0.2 * spread).all()  # not the predictive spread
     # the same posterior as a DataTree from pm.sample, passed as the model
     posterior = xr.Dataset({n: (("chain", "draw"), d.reshape(2, 200)) for n, d in
                             zip(names, draws.T, strict=True)})  # fmt: skip
@@ -245,7 +287,7 @@ def test_posterior_band_covers_its_population():
 
 @cache
 def study(scenario: str, seed: int = 0):
-    return hidden_effect_study(scenario, seed, assemblies=3, levels=8)
+    return criticism_study(scenario, seed, assemblies=3, levels=8)
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS)
@@ -261,14 +303,14 @@ def test_hidden_effect_is_found_first(scenario):
     assert not result.criticisms[-1].significant, row
     steps = result.history
     assert len(steps) == 1 + len(result.hidden)
-    assert steps[-1].information_criterion < steps[0].information_criterion - 100
+    assert all(c.verdict in ("explained", "partly explained") for c in result.criticisms[:-1])
 
 
 def test_microslip_reading_is_specific():
     best = study("hidden-microslip").criticisms[0].missing()[0]
     assert best.effect == "microslip"
     assert "frequency softening" in best.reading
-    assert "damping rising" in best.reading and "partial slip" in best.reading
+    assert "damping rising" in best.reading and "consistent with partial slip" in best.reading
 
 
 def test_quadratic_stiffness_needs_the_records():
@@ -280,118 +322,11 @@ def test_quadratic_stiffness_needs_the_records():
     blind = criticize(result.start, result.measured.without_harmonics())
     assert not blind.significant
     with_records = result.criticisms[0]
-    ranked = [c.effect for c in with_records.missing()]
-    assert ranked[0] == "quadratic_stiffness"
+    ranked = [c.effect for c in with_records.candidates]
+    assert ranked[0] == "quadratic_stiffness" == with_records.missing()[0].effect
     assert ranked.index("velocity_squared") > 0
     (failure,) = [f for f in with_records.where() if f.channel == "harmonic2"]
     assert failure.direction == "under-predicted" and failure.max_residual > 0.02
-
-
-#: The proposed ranking (effect, ΔBIC) of every round of each scenario's study (seed 0,
-#: 3 assemblies, 8 levels) as main computed it before the backbones kept their harmonics
-#: (commit 49ef863, harmonics re-fitted from the records by fit._hold_harmonics).
-RANKINGS_BEFORE = {
-    "hidden-none": [
-        [],
-    ],
-    "hidden-cubic": [
-        [
-            ("cubic_stiffness", -3199.0983345317827),
-            ("tanh_saturation", -3194.1193629446025),
-            ("abs_stiffness", -2827.823626497068),
-            ("displacement_velocity_squared", -2361.426858939386),
-            ("exponential", -1703.0470405266428),
-        ],
-        [],
-    ],
-    "hidden-quadratic": [
-        [
-            ("quadratic_stiffness", -5893.958457374626),
-            ("exponential", -5888.251625048552),
-            ("velocity_squared", -5793.188859853253),
-            ("displacement_velocity_squared", -17.3324879338561),
-        ],
-        [],
-    ],
-    "hidden-quadratic-damping": [
-        [
-            ("quadratic_damping", -3546.31396597158),
-            ("cubic_damping", -3313.3717848960296),
-            ("van_der_pol", -3308.2855457555443),
-            ("microslip", -3142.2275945149368),
-            ("stribeck_friction", -1462.2125133753116),
-            ("coulomb_friction", -1425.1187042530046),
-        ],
-        [],
-    ],
-    "hidden-coulomb": [
-        [
-            ("coulomb_friction", -4476.635053158853),
-            ("stribeck_friction", -4471.665238409574),
-            ("microslip", -4471.331932630643),
-            ("quadratic_damping", -1734.7899224494013),
-            ("cubic_damping", -985.9465253252547),
-            ("van_der_pol", -984.822728010251),
-        ],
-        [],
-    ],
-    "hidden-microslip": [
-        [
-            ("microslip", -17926.982494594922),
-            ("stribeck_friction", -8870.861008328484),
-            ("coulomb_friction", -8134.78420034784),
-            ("tanh_saturation", -2115.527139340722),
-            ("abs_stiffness", -2012.6361448063726),
-            ("quadratic_damping", -639.4310971378618),
-            ("exponential", -190.0873191965875),
-            ("displacement_velocity_squared", -19.48896162737765),
-        ],
-        [],
-    ],
-    "hidden-two": [
-        [
-            ("microslip", -18072.163645508528),
-            ("stribeck_friction", -10374.541961785793),
-            ("coulomb_friction", -9305.750003213445),
-            ("cubic_stiffness", -4268.560728420685),
-            ("tanh_saturation", -4258.755209593619),
-            ("displacement_velocity_squared", -2287.6735917525184),
-            ("exponential", -2269.515676264142),
-            ("abs_stiffness", -1965.5316226551222),
-            ("quadratic_damping", -308.95173498238364),
-            ("cubic_damping", -100.24701870915669),
-            ("van_der_pol", -100.24184780085488),
-        ],
-        [
-            ("cubic_stiffness", -9472.29907304757),
-            ("tanh_saturation", -9467.280606523955),
-            ("abs_stiffness", -8137.065422223094),
-            ("displacement_velocity_squared", -5640.607246147686),
-            ("exponential", -3751.5327295922525),
-            ("van_der_pol", -233.21539123925868),
-            ("cubic_damping", -232.4068399518028),
-            ("quadratic_damping", -126.94512990209114),
-            ("coulomb_friction", -52.21467204689634),
-        ],
-        [],
-    ],
-}
-
-
-@pytest.mark.parametrize("scenario", SCENARIOS)
-def test_ranking_and_delta_bic_are_unchanged_by_the_harmonics_moving_into_the_backbones(scenario):
-    """The backbones now carry the harmonics the criticism used to re-fit from the
-    records: same ranking, same ΔBIC (1e-6 relative) in every round. Some candidate fits
-    (Stribeck in hidden-two) move by up to 20 in ΔBIC when the data move by one
-    rounding, so a change that only rounds differently can fail here too: judge it. (The
-    effects' describing functions summed in another order moved hidden-microslip's Stribeck
-    fit by 4e-6 relative: 1e-4 holds rounding, not a changed statistic.)"""
-    got = [[(c.effect, c.delta_ic) for c in crit.missing()] for crit in study(scenario).criticisms]
-    expected = RANKINGS_BEFORE[scenario]
-    assert [[e for e, _ in r] for r in got] == [[e for e, _ in r] for r in expected]
-    for round_got, round_expected in zip(got, expected, strict=True):
-        np.testing.assert_allclose([d for _, d in round_got], [d for _, d in round_expected],
-                                   rtol=1e-4)  # fmt: skip
 
 
 @pytest.mark.slow
@@ -400,3 +335,55 @@ def test_ranking_and_delta_bic_are_unchanged_by_the_harmonics_moving_into_the_ba
 def test_hidden_effect_study_over_seeds(scenario, seed):
     result = study(scenario, seed)
     assert result.passed, result.row()
+
+
+# --------------------------------------------------------------------------
+# Lab scenarios (identification.rig.rig_for_preset): artefacts are not physics
+
+
+def test_lab_drift_is_drift_not_physics():
+    """Natural frequency +0.2 % within each run, linear in time, levels stepped up then
+    down: the branches differ by time, so the verdict is drift, with its rate near the
+    preset's 0.2 %·f₀ over a record's duration (the holds carry their times, so the rate
+    is per hour), and nothing is proposed as physics."""
+    result = study("lab-drift")
+    crit = result.criticisms[0]
+    assert crit.verdict == "drift" and not crit.missing(), crit.summary()
+    (frequency,) = [d for d in crit.drift if d.channel == "frequency_hz" and d.significant]
+    f0 = np.sqrt(result.truth.coefficient("linear_stiffness")) / (2 * np.pi)
+    record_hours = np.mean([r.time_s[-1] - r.time_s[0] for r in result.records]) / 3600
+    assert frequency.time_unit == "hour"
+    assert frequency.rate == pytest.approx(0.002 * f0 / record_hours, rel=0.2)
+    assert "drift, not joint physics" in crit.summary()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize(
+    "scenario",
+    [
+        pytest.param(
+            s,
+            marks=pytest.mark.xfail(
+                reason="seed 0 measured: the free-form reference fires on the 2nd harmonic at "
+                "the lowest level (0.58 % of the fundamental): the excitation's harmonics are "
+                "not yet forcing the model (crit-measure's branch)"
+            ),
+        )
+        if s in ("lab-all", "lab-all-hardening")
+        else s
+        for s in LAB_NULL_SCENARIOS
+    ],
+)
+def test_lab_null_scenarios_find_nothing(scenario, seed):
+    result = study(scenario, seed)
+    assert result.passed and not result.false_discovery, result.row()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", LAB_OUT_OF_CATALOGUE_SCENARIOS)
+def test_out_of_catalogue_physics_is_not_explained_as_physics(scenario):
+    result = study(scenario)
+    crit = result.criticisms[0]
+    assert crit.verdict in ("not explained by the catalogue", "partly explained"), crit.summary()
+    assert all(not c.problems for c in crit.missing())

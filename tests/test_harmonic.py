@@ -312,3 +312,111 @@ def test_bad_shape_parameter_is_named():
     model = microslip_model()
     with pytest.raises(ValueError, match=r"microslip\.k_t"):
         backbone(model, [1e-4], parameters=[[-1.0]], names=["microslip.k_t"])
+
+
+# ------------------------------------------------ a measured excitation as the forcing
+
+
+def fourier_phasors(samples: np.ndarray) -> np.ndarray:
+    """``Z_k`` of ``Σ_k Re(Z_k e^{ikθ})`` from samples at ``θ = 2πn/N`` (numpy's FFT)."""
+    return 2 * np.fft.rfft(samples) / samples.size
+
+
+def own_frame(phasors: np.ndarray) -> np.ndarray:
+    """Orders 2.. as fractions of the fundamental, in the frame where it is a real cosine."""
+    k = np.arange(phasors.size)
+    return (phasors * np.exp(-1j * k * np.angle(phasors[1])))[2:] / abs(phasors[1])
+
+
+THETA = 2 * np.pi * np.arange(256) / 256
+#: A shaker's base acceleration per unit fundamental, phase-resonance frame (sin θ): 5 % of
+#: 2nd and 4 % of 3rd harmonic.
+SHAKER = np.sin(THETA) + 0.05 * np.sin(2 * THETA + 0.5) + 0.04 * np.sin(3 * THETA - 1.0)
+
+
+@pytest.mark.parametrize("kind", ["base_acceleration", "force"])
+def test_linear_response_harmonics_are_the_frf_times_the_excitation_harmonics(kind):
+    """ẍ + cẋ + kx = p: each response harmonic is H(kω)·P_k with H(Ω) = 1/(k − Ω² + icΩ),
+    whatever the fundamental. The excitation is written in time (p = −a_base for a base
+    acceleration, the force per unit mass for a force), its ratios measured from it by
+    numpy's FFT in its own frame, as a test would."""
+    zeta, a = 0.01, 1e-3
+    model = JointModel({"linear_stiffness": W0**2, "viscous_damping": 2 * zeta * W0})
+    shape = SHAKER if kind == "base_acceleration" else -SHAKER  # p₁ = −A sin θ either way
+    ratios = own_frame(fourier_phasors(shape))
+    result = backbone(model, [a], method="multi", excitation_harmonics=ratios,
+                      excitation_kind=kind)  # fmt: skip
+    omega, amplitude = 2 * np.pi * result.frequency_hz[0], result.base_acceleration[0]
+    assert omega == pytest.approx(W0, rel=1e-12)  # the fundamental is the linear one's
+    assert amplitude == pytest.approx(2 * zeta * W0 * omega * a, rel=1e-10)
+    forcing = fourier_phasors(amplitude * (-shape if kind == "base_acceleration" else shape))
+    k = np.arange(2, 6)
+    expected = forcing[k] / (W0**2 - (k * omega) ** 2 + 2j * zeta * W0 * k * omega)
+    computed = result.harmonics_cos_m[0, k] - 1j * result.harmonics_sin_m[0, k]
+    np.testing.assert_allclose(computed / a, expected / a, atol=1e-12)
+    assert abs(computed[0]) / a > 1e-4  # the forcing's 2nd harmonic shows
+    # a pure excitation is the pure-sine path, number for number
+    pure = backbone(model, [a], method="multi")
+    zero = backbone(model, [a], method="multi", excitation_harmonics=[0.0, 0.0],
+                    excitation_kind=kind)  # fmt: skip
+    np.testing.assert_array_equal(zero.harmonics_cos_m, pure.harmonics_cos_m)
+    np.testing.assert_array_equal(zero.frequency_hz, pure.frequency_hz)
+
+
+def test_duffing_driven_by_a_distorted_base_matches_the_independent_simulator():
+    """A Duffing oscillator (2 % hardening at 1 mm, ζ = 2 %) driven by the phase-resonant
+    base acceleration the balance gives, distortion included, integrated by the independent
+    simulator (DOP853): the steady state has the fundamental a cos θ (phase resonance at
+    that amplitude) and the harmonics the balance predicts. Driven by a pure sine instead,
+    a symmetric Duffing oscillator has no 2nd harmonic at all."""
+    from independent_sim import forced_steady_state
+
+    zeta, k3, a = 0.02, 2e10, 1e-3
+    model = duffing(k3, damping_ratio=zeta)
+    ratios = own_frame(fourier_phasors(SHAKER))
+    result = backbone(model, [a], method="multi", harmonics=7, excitation_harmonics=ratios)
+    omega, amplitude = 2 * np.pi * result.frequency_hz[0], result.base_acceleration[0]
+    assert omega / W0 - 1 > 0.015
+
+    def shaker(t: float) -> float:
+        theta = omega * t
+        return np.sin(theta) + 0.05 * np.sin(2 * theta + 0.5) + 0.04 * np.sin(3 * theta - 1.0)
+
+    steady = forced_steady_state(
+        lambda x, v: W0**2 * x + 2 * zeta * W0 * v + k3 * x**3,
+        lambda t: -amplitude * shaker(t),
+        2 * np.pi / omega,
+        fs_hz=320 * omega / (2 * np.pi),  # 320 samples per period
+        settle_periods=300,
+        record_periods=10,
+    )
+    theta = omega * (steady["time_s"] + 300 * 2 * np.pi / omega)
+    k = np.arange(6)
+    basis = np.column_stack([np.cos(np.outer(theta, k)), np.sin(np.outer(theta, k[1:]))])
+    coef = np.linalg.lstsq(basis, steady["displacement_m"], rcond=None)[0]
+    simulated = coef[:6] - 1j * np.concatenate([[0.0], coef[6:]])
+    assert simulated[1] == pytest.approx(a, rel=1e-6, abs=1e-6 * a)  # a cos θ: phase resonance
+    predicted = result.harmonics_cos_m[0, :6] - 1j * result.harmonics_sin_m[0, :6]
+    np.testing.assert_allclose(simulated / a, predicted / a, atol=2e-7)
+    assert abs(simulated[2]) / a > 3e-4
+    pure = backbone(model, [a], method="multi", harmonics=7)
+    assert abs(pure.harmonics_cos_m[0, 2]) + abs(pure.harmonics_sin_m[0, 2]) < 1e-12 * a
+
+
+@pytest.mark.parametrize("kind, sign", [("base_acceleration", -1.0), ("force", 1.0)])
+def test_a_mean_in_the_excitation_is_a_static_offset_of_the_linear_response(kind, sign):
+    """A mean m·A in the excitation (a force-driven test's static preload; p = −a_base for
+    a base acceleration) displaces a linear oscillator by its static deflection p̄/k, leaves
+    the fundamental's resonance alone and adds no harmonics."""
+    zeta, a, mean = 0.01, 1e-3, 0.2
+    model = JointModel({"linear_stiffness": W0**2, "viscous_damping": 2 * zeta * W0})
+    result = backbone(model, [a], method="multi", excitation_mean=mean, excitation_kind=kind)
+    amplitude = result.base_acceleration[0]
+    assert amplitude == pytest.approx(2 * zeta * W0**2 * a, rel=1e-10)
+    assert result.harmonics_cos_m[0, 0] == pytest.approx(sign * mean * amplitude / W0**2, rel=1e-9)
+    np.testing.assert_allclose(
+        result.harmonics_cos_m[0, 2:], 0, atol=1e-11 * a
+    )  # the solver tolerance
+    np.testing.assert_allclose(
+        result.harmonics_sin_m[0, 2:], 0, atol=1e-11 * a
+    )  # the solver tolerance

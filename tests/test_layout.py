@@ -125,3 +125,16 @@ def test_pj_criticize_is_the_posterior_adapter():
     import pm_joint as pj
 
     assert pj.criticize.__module__ == "pm_joint.analysis.posterior"
+
+
+def test_the_criticism_and_the_fits_do_not_need_pymc():
+    """The criticism engine sits with the fits it uses; only pm_joint adapts posteriors to it."""
+    for room in ("criticism", "fitting"):
+        for path in (ROOT / "identification" / room).rglob("*.py"):
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+            names |= {
+                n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module
+            }
+            heavy = sorted(n for n in names if n.split(".")[0] in ("pymc", "pytensor", "arviz"))
+            assert not heavy, f"{path.relative_to(ROOT)} imports {heavy}"

@@ -21,6 +21,7 @@ import pytest
 import torch
 
 from pm_joint.studies import table5_study
+from surrogates.dataset import BackboneDataset
 from surrogates.evaluate import PAPER_TABLE5, backbone_metrics
 from surrogates.export import export_surrogate
 from surrogates.nets import Autoencoder, KerasConv1d, LatentRegressor, NetConfig
@@ -346,15 +347,22 @@ def test_metrics_against_a_known_error():
 
 
 def test_table5_study_rows_carry_the_papers_figures():
-    x, y, spec = dataset(230, seed=8)
+    x, y, spec = dataset(260, seed=8)
+    data = BackboneDataset(
+        X=x, Y=y, spec=spec, origin=np.full(len(x), "analytical"),
+        non_monotone=np.zeros(len(x), bool), failed_parameters=np.empty((0, 4)),
+        failed_reasons=np.empty(0, str), provenance={},
+    ).with_splits(0.1, 0.1)  # fmt: skip
     config = TrainingConfig(net=TINY, max_epochs=2, finetune_epochs=0, progress=False)
-    rows = table5_study(x, y, spec, sizes=(150, 200), n_test=30, config=config)
+    rows = table5_study(data, sizes=(150, 200), config=config)
     assert [r["n_train"] for r in rows] == [150, 200]
+    assert all(r["n_validation"] == 26 and r["n_test"] == 26 for r in rows)
     assert rows[0]["paper_mse"] is None
     assert (rows[1]["paper_mse"], rows[1]["paper_mae"], rows[1]["paper_mape"]) == PAPER_TABLE5[200]
-    assert all(r["mse_amplitude_mm2"] > 0 and np.isfinite(r["pearson"]) for r in rows)
-    with pytest.raises(ValueError, match="only 200 training curves"):
-        table5_study(x, y, spec, sizes=(201,), n_test=30, config=config)
+    assert all(r["mse_amplitude_mm2"] > 0 and r["rmse_frequency_hz"] > 0 for r in rows)
+    assert all(r["table5_representation"] == "excitation_levels" for r in rows)
+    with pytest.raises(ValueError, match="only 208 training curves"):
+        table5_study(data, sizes=(209,), config=config)
 
 
 def test_a_widened_box_in_the_sidecar_is_a_hash_mismatch(tmp_path, trained):

@@ -28,7 +28,9 @@ from identification.analytical.pll import pll_backbones
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.extraction import extract_backbones
 from identification.model import JointModel
-from identification.rig import RIG_PRESETS, Rig, read_ground_truth
+from identification.rig import Rig, read_ground_truth
+from pm_joint.analysis import loo, population_predictive
+from pm_joint.analysis.posterior import criticize, posterior_samples
 from pm_joint.distributions import BackboneDensity, NanCounter, amplitude_levels, level_marks
 from pm_joint.forward import HarmonicBalanceGraph, PLLOp, SurrogateOp
 from pm_joint.inference import (
@@ -40,7 +42,8 @@ from pm_joint.inference import (
     save_posterior,
     stored_density,
 )
-from pm_joint.studies import population_coverage, synthetic_campaign
+from pm_joint.inference.traces import written_steps
+from pm_joint.studies import binomial_bounds, population_coverage, synthetic_campaign
 from surrogates import (
     NetConfig,
     SurrogateRuntime,
@@ -219,17 +222,32 @@ CALIBRATION = {
 }
 
 
-@pytest.mark.slow
-def test_hierarchical_model_intervals_hold_the_population_mean():
-    """20 synthetic campaigns: the 90 % intervals of the population mean hold the truth."""
-    log_mean, log_spread = np.array(list(CALIBRATION.values())).T
+def test_hierarchical_model_is_calibrated_on_pll_campaigns():
+    """Five campaigns, truths from the prior, data from the PLL simulator (not the
+    single-harmonic graph the model infers with): 90 % intervals of the population
+    log-means and log-spreads hold the truth within two-sided binomial bounds.
+
+    Five campaigns bound only gross miscalibration (a count of 2 or less of 5 fails);
+    bench/population_coverage.py runs 20 or more.
+    """
     coverage = population_coverage(
-        RIG_PRESETS[TRC].model, list(CALIBRATION), log_mean, log_spread,
-        1e-3 * np.geomspace(0.05, 2.0, 12), n_campaigns=20, progress=False,
+        DUFFING, NAMES, np.geomspace(0.3, 5.0, 8), 1e-3 * np.geomspace(0.12, 1.1, 6),
+        n_campaigns=5, n_curves=6, location_scale=0.02, population_scale=0.05,
+        channels=("frequency_hz",), draws=300, tune=800, progress=False,
     )  # fmt: skip
     print(coverage)
-    assert 0.8 <= coverage.count / coverage.covered.size <= 1.0
-    assert coverage.divergences.max() <= 5
+    assert coverage.bounds() == (3, 5)  # Binomial(5, 0.9): P(X ≤ 2) = 0.0086
+    assert coverage.within_bounds()
+    # NUTS meets the log-spread funnel now and then: 0–29 divergences per campaign of 600
+    # draws were seen on the same seeds. Coverage is the claim; the divergences stay a
+    # small share of all draws (issue #17 keeps the reparameterisation open).
+    assert coverage.divergences.sum() <= 0.02 * 5 * 2 * 300
+
+
+def test_binomial_bounds_reject_full_coverage_over_many_campaigns():
+    low, high = binomial_bounds(80, 0.9)
+    assert (low, high) == (66, 77)  # 80/80 is 0.9**80 = 2e-4 likely: not calibrated
+    assert stats.binom.cdf(low - 1, 80, 0.9) < 0.025 < stats.binom.cdf(low, 80, 0.9)
 
 
 def test_hierarchical_model_recovers_a_small_population():
@@ -245,6 +263,49 @@ def test_hierarchical_model_recovers_a_small_population():
     z = (per_curve.mean(axis=0) - theta) / per_curve.std(axis=0)
     print(f"per-curve parameters, posterior mean - truth in posterior sd: {z.round(2).tolist()}")
     assert np.all(np.abs(z) < 4)
+    # A likelihood of every measured point: LOO runs, over the 5 × 8 points.
+    result = loo(idata, pm_model)
+    assert result.elpd_i.size == 40 and np.isfinite(result.elpd)
+    # New assemblies scatter like the population, not like one curve's noise: their
+    # cubic stiffness spread (0.1 in log) shows in the frequency at the top amplitude.
+    amplitudes = 1e-3 * np.array([0.1, 1.5])
+    new = population_predictive(idata, DUFFING, NAMES, amplitudes, n_draws=600)
+    top = new["frequency_hz"].values[:, -1]
+    clean = backbone(DUFFING, amplitudes[-1:], parameters=theta, names=NAMES)
+    print(f"new assemblies at 1.5 mm: sd {top.std():.3f} Hz; the five curves: "
+          f"{clean.frequency_hz[:, 0].std(ddof=1):.3f} Hz; noise 0.02 Hz")  # fmt: skip
+    assert top.std() > 3 * 0.02
+    # The criticism is handed the population's median assembly, whose spread is the
+    # uncertainty of the population-mean curve: about 1/√5 of the assemblies' scatter.
+    names, median = posterior_samples(idata)
+    assert names == NAMES and median.shape == (200, 2)
+    assemblies = idata.posterior["theta"].values.reshape(-1, 2)
+    ratio = np.log(median[:, 1]).std() / np.log(assemblies[:, 1]).std()
+    print(f"log cubic stiffness: population median sd / assemblies' sd = {ratio:.2f}")
+    assert ratio < 0.7
+    # So the criticism's test widens by about the population spread over √5, not by the
+    # spread itself (the new assemblies' sd at 1.5 mm).
+    se_alone = criticize(DUFFING, measured).residual("frequency_hz")[1][-1]
+    se_given = criticize(DUFFING, measured, posterior=idata).residual("frequency_hz")[1][-1]
+    widening = np.sqrt(max(se_given**2 - se_alone**2, 0.0))
+    print(f"frequency standard error at 1.5 mm: {se_alone:.3f} Hz alone, {se_given:.3f} Hz "
+          f"given the posterior: widened by {widening:.3f} Hz = {widening / top.std():.2f} of "
+          "the population spread (1/√5 = 0.45)")  # fmt: skip
+    assert widening < 0.7 * top.std()
+
+
+def test_loo_refuses_population_matching():
+    measured = _duffing_curves()
+    pm_model = build_model(DUFFING, measured, names=NAMES, bounds=BOUNDS, family="mvn")
+    idata = sample(pm_model, draws=200, tune=200, chains=1, cores=1, progressbar=False)
+    assert idata.attrs["population_model"] == "population matching"
+    # No observed variable: nothing for PyMC to score point by point ...
+    assert not pm_model.observed_RVs
+    # ... and LOO says why instead of returning a number.
+    with pytest.raises(ValueError, match="not a likelihood of the measured curves"):
+        loo(idata, pm_model)
+    with pytest.raises(ValueError, match="LOO refused"):
+        loo(idata)  # the DataTree alone knows what it is
 
 
 # -- bad input -----------------------------------------------------------------------
@@ -397,7 +458,10 @@ def test_a_killed_run_leaves_its_draws(tmp_path):
     idata = load_posterior(folder)
     x = idata.posterior["x"].values
     assert idata.attrs["interrupted"] == 1
-    assert x.shape[:2] == (2, written - 200) and np.isfinite(x).all()
+    # The chains go on writing between the last poll and the kill: at least what was polled,
+    # in whole chunks of 100 steps (200 of them tuning).
+    assert x.shape[0] == 2 and x.shape[1] >= written - 200 and np.isfinite(x).all()
+    assert (x.shape[1] + 200) % 100 == 0
     # The draws are the standard normal's (Metropolis: about 1 effective draw in 5).
     assert abs(x.mean()) < 0.25 and 0.75 < x.std() < 1.25
     # ... and the run goes on from there to the draws it was asked for.
@@ -416,16 +480,12 @@ def test_a_killed_run_leaves_its_draws(tmp_path):
 
 def _wait_for_draws(folder, n, child, timeout_s=120.0):
     """Poll the trace until every chain has written ``n`` steps; return how many."""
-    import zarr
-
     start = time.monotonic()
     while time.monotonic() - start < timeout_s:
         assert child.poll() is None, "the sampling process ended on its own"
         try:
-            written = int(
-                np.min(zarr.open_group(str(folder), mode="r")["_sampling_state/draw_idx"])
-            )
-        except (KeyError, ValueError, zarr.errors.GroupNotFoundError):
+            written = min(written_steps(folder))
+        except ValueError:
             written = 0  # not created yet
         if written >= n:
             return written

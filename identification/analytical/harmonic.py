@@ -17,6 +17,14 @@ a PLL test holds. For each amplitude ``a`` the backbone gives
 damping at that amplitude is negative (e.g. a dominant negative Van der Pol
 term), so energy must be taken out to hold the amplitude.
 
+A test's base motion is not a pure sine (shaker distortion, a PLL's frequency
+ripple). With ``method="multi"`` the measured excitation's harmonics and mean can be
+the forcing (``excitation_harmonics``, :func:`forcing_rows`): its fundamental is still
+``A sin ωt`` with ``A`` the unknown the phase-resonance condition fixes, its
+harmonics are the measured fractions of ``A``, so the response harmonics the
+excitation explains are in the model's prediction and not left to its joint terms.
+A force-driven test is the same with the force per unit mass in place of ``−a_base``.
+
 Two methods:
 
 ``"single"``
@@ -53,12 +61,14 @@ from identification.effects.base import NUMPY
 from identification.model import JointModel
 
 __all__ = [
+    "EXCITATION_KINDS",
     "CoefficientTable",
     "HarmonicBackbone",
     "backbone",
     "coefficient_table",
     "default_time_samples",
     "describing_sums",
+    "forcing_rows",
     "single_harmonic_backbone",
 ]
 
@@ -261,8 +271,10 @@ def single_harmonic_backbone(
     damping = np.full(shape, np.nan)
     done = np.zeros(shape, dtype=bool)
     for _ in range(max_iter):
-        k_eq, c_eq = describing_sums(a, omega, table)
-        with np.errstate(invalid="ignore"):
+        # Describing functions overflow where a term grows without bound (exp, x·ẋ² at
+        # large amplitudes): no backbone there, which the NaN below reports.
+        with np.errstate(over="ignore", invalid="ignore"):
+            k_eq, c_eq = describing_sums(a, omega, table)
             updated = np.sqrt(np.where(k_eq > 0, k_eq, np.nan))
         settled = ~done & (np.abs(updated - omega) <= rtol * updated)
         # Freeze settled points: the answer must not depend on what else is in the batch.
@@ -289,7 +301,8 @@ def _linear_stiffness(table: CoefficientTable) -> np.ndarray:
 # Unknowns y = [X0, ω, C2, S2, …, CH, SH] (the fundamental is fixed to a cos θ),
 # residual rows [mean, cos θ, cos 2θ, sin 2θ, …, cos Hθ, sin Hθ]: row e pairs with
 # unknown e, row 1 (the fundamental's cosine) with ω. The sin θ row only gives the
-# base acceleration, A = −F_s1, since A enters nowhere else.
+# base acceleration, A = −F_s1; a measured excitation's harmonics and mean enter row e
+# as A·u_e = −u_e·F_s1 (forcing_rows), which folds into that row's projection.
 
 #: Relative forward-difference step of the per-sample tangents ∂f/∂x, ∂f/∂ẋ (≈ √ε).
 _TANGENT_STEP = 1e-8
@@ -563,8 +576,12 @@ def _multi_harmonic(
     n_time: int,
     tol: float,
     max_iter: int,
+    forcing: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Solved unknowns ``(n_sets, n_amp, 2H)``, base acceleration and convergence.
+
+    ``forcing`` is None (a pure sine) or the ``(n_amp, 2H)`` rows of
+    :func:`forcing_rows`, one per amplitude.
 
     The cases are independent: they are split over ``numba.get_num_threads()``
     Python threads (the kernel releases the GIL). Threads rather than numba's
@@ -581,28 +598,40 @@ def _multi_harmonic(
     amplitude = np.broadcast_to(a, shape).ravel().astype(float)
     omega_start = omega_start.ravel()
     set_index = np.repeat(np.arange(table.n_sets), shape[1])
-    shared = (
+    coefficients = (
         table.indices, np.ascontiguousarray(table.coefficients),
         np.ascontiguousarray(table.shapes), np.ascontiguousarray(table.microslip),
-        tables["orders"], tables["projection"], tables["projection_sin1"], tables["basis_x"],
-        tables["basis_v"], tables["cos1"], tables["sin1"], float(tol), int(max_iter),
+        tables["orders"],
+    )  # fmt: skip
+    rest = (
+        tables["projection_sin1"], tables["basis_x"], tables["basis_v"], tables["cos1"],
+        tables["sin1"], float(tol), int(max_iter),
     )  # fmt: skip
 
-    def solve(part: slice) -> None:
+    def solve(part: slice, projection: np.ndarray) -> None:
         _multi_harmonic_kernel(
-            amplitude[part], omega_start[part], set_index[part], *shared,
-            y[part], base[part], converged[part],
+            amplitude[part], omega_start[part], set_index[part], *coefficients, projection,
+            *rest, y[part], base[part], converged[part],
         )  # fmt: skip
 
     n_threads = min(numba.get_num_threads(), n_cases // _CASES_PER_THREAD)
+    if forcing is None:  # interleaved: neighbouring amplitudes cost alike
+        parts = [slice(i, None, max(n_threads, 1)) for i in range(max(n_threads, 1))]
+        projections = [tables["projection"]] * len(parts)
+    else:
+        # The fundamental's amplitude A = −F_s1 scales the whole excitation, so row e
+        # balances F_e + u_e·F_s1: amplitude j's cases get the sin θ projection added to
+        # each row with the weight of its excitation.
+        parts = [slice(j, None, shape[1]) for j in range(shape[1])]
+        projections = [
+            np.ascontiguousarray(tables["projection"] + np.outer(u, tables["projection_sin1"]))
+            for u in forcing
+        ]
     if n_threads < 2:
-        solve(slice(None))
-    else:  # interleaved: neighbouring amplitudes cost alike
-        list(
-            _thread_pool(n_threads).map(
-                solve, [slice(i, None, n_threads) for i in range(n_threads)]
-            )
-        )
+        for part, projection in zip(parts, projections, strict=True):
+            solve(part, projection)
+    else:
+        list(_thread_pool(n_threads).map(solve, parts, projections))
     return y.reshape(*shape, n_unknowns), base.reshape(shape), converged.reshape(shape)
 
 
@@ -620,6 +649,78 @@ def _thread_pool(n_threads: int) -> ThreadPoolExecutor:
 
 
 # --------------------------------------------------------------------------
+# A measured excitation as the forcing of the multi-harmonic balance.
+
+#: What a measured excitation is: the base acceleration of a base-excited test (the
+#: model's forcing ``p`` in ``ẍ + f(x, ẋ) = p`` is its negative), or the force per unit
+#: modal mass of a force-driven one (``p`` itself).
+EXCITATION_KINDS = ("base_acceleration", "force")
+
+
+def forcing_rows(
+    excitation_harmonics: ArrayLike,
+    n_amplitudes: int,
+    harmonics: int,
+    kind: str = "base_acceleration",
+    excitation_mean: ArrayLike | None = None,
+) -> np.ndarray | None:
+    """The excitation's shape in the residual rows of the multi-harmonic balance.
+
+    The excitation ``e`` is described as measured: its orders ``k = 2, 3, …`` as complex
+    fractions ``r_k`` of its fundamental, in the frame where that fundamental is a real
+    cosine (:attr:`~identification.measurements.backbone.Backbone.excitation_harmonics`),
+    ``e = |E₁| (cos θ_e + Σ_k Re(r_k e^{ikθ_e}) + m)`` with ``m`` the mean over ``|E₁|``.
+    At phase resonance the forcing's fundamental is ``p₁ = −A sin θ`` in the frame where
+    the displacement's is ``a cos θ`` (``A`` the fundamental's amplitude the balance
+    solves for), so with ``p = σ e`` (``σ = −1`` for a base acceleration, ``+1`` for a
+    force) the forcing's order ``k`` is ``A·σ r_k (iσ)^k`` and its mean ``A·σ m``.
+
+    Parameters
+    ----------
+    excitation_harmonics
+        ``(n_orders,)`` ratios shared by every amplitude, or ``(n_amplitudes, n_orders)``;
+        orders start at 2; orders above ``harmonics`` are not balanced.
+    n_amplitudes, harmonics
+        Amplitudes and highest harmonic of the balance.
+    kind
+        One of :data:`EXCITATION_KINDS`.
+    excitation_mean
+        Mean of the excitation over its fundamental's amplitude (scalar or per
+        amplitude); None: 0 (a periodic base motion has no mean acceleration).
+
+    Returns
+    -------
+    ``(n_amplitudes, 2·harmonics)`` rows ``u`` in the layout of the residual (mean,
+    cos θ, then cos kθ, sin kθ for ``k = 2..H``; the cos θ entry is 0), per unit ``A``;
+    None when the excitation is a pure sine.
+    """
+    if kind not in EXCITATION_KINDS:
+        raise ValueError(f"excitation kind must be one of {EXCITATION_KINDS}, got {kind!r}")
+    ratios = np.asarray(excitation_harmonics, dtype=complex)
+    if ratios.ndim == 1:
+        ratios = np.broadcast_to(ratios, (n_amplitudes, ratios.size))
+    if ratios.ndim != 2 or ratios.shape[0] != n_amplitudes:
+        raise ValueError(
+            f"excitation_harmonics must have shape (n_orders,) or ({n_amplitudes}, n_orders), "
+            f"got {np.shape(excitation_harmonics)}"
+        )
+    mean = np.broadcast_to(
+        np.asarray(0.0 if excitation_mean is None else excitation_mean, dtype=float),
+        (n_amplitudes,),
+    )
+    if not (np.isfinite(ratios).all() and np.isfinite(mean).all()):
+        raise ValueError("excitation_harmonics and excitation_mean must be finite")
+    sign = -1.0 if kind == "base_acceleration" else 1.0
+    rows = np.zeros((n_amplitudes, 2 * harmonics))
+    rows[:, 0] = sign * mean
+    for m in range(min(ratios.shape[1], harmonics - 1)):
+        k = m + 2
+        forcing = sign * ratios[:, m] * (1j * sign) ** k
+        rows[:, 2 * k - 2], rows[:, 2 * k - 1] = forcing.real, -forcing.imag
+    return rows if rows.any() else None
+
+
+# --------------------------------------------------------------------------
 # Public entry point.
 
 
@@ -634,6 +735,9 @@ def backbone(
     n_time: int | None = None,
     tol: float = 1e-10,
     max_iter: int = 50,
+    excitation_harmonics: ArrayLike | None = None,
+    excitation_kind: str = "base_acceleration",
+    excitation_mean: ArrayLike | None = None,
 ) -> HarmonicBackbone:
     """Phase-resonant backbone of ``model`` at the given fundamental amplitudes.
 
@@ -660,6 +764,16 @@ def backbone(
         ``"multi"``: converged when every harmonic residual is below ``tol · ω² a``.
     max_iter
         ``"multi"``: Newton iterations before a case is declared not converged.
+    excitation_harmonics, excitation_kind, excitation_mean
+        ``"multi"``: the measured excitation as the forcing (:func:`forcing_rows`): its
+        orders ``2, 3, …`` as fractions of its fundamental in its own frame, per
+        amplitude ``(n_amp, n_orders)`` or shared ``(n_orders,)``; what it is
+        (:data:`EXCITATION_KINDS`: a base acceleration or a force per unit mass); its
+        mean over its fundamental's amplitude. The fundamental's amplitude is still
+        the unknown the phase-resonance condition fixes (``base_acceleration``, which
+        is then the force per unit mass for ``"force"``), the harmonics scale with
+        it, and the damping ratio stays that of the fundamental's power balance. None:
+        a pure sine.
 
     Returns
     -------
@@ -673,7 +787,10 @@ def backbone(
     table = coefficient_table(model, parameters, names)
     omega, damping, converged = single_harmonic_backbone(a, table)
     cos_m = sin_m = None
+    forced = excitation_harmonics is not None or excitation_mean is not None
     if method == "single":
+        if forced:
+            raise ValueError("an excitation with harmonics or a mean needs method='multi'")
         harmonics = 1
     else:
         if not isinstance(harmonics, int | np.integer) or harmonics < 1:
@@ -688,15 +805,23 @@ def backbone(
             raise ValueError(
                 f"n_time must be an integer ≥ 4·harmonics + 1 = {4 * harmonics + 1}, got {n_time!r}"
             )
-        y, base, converged = _multi_harmonic(a, table, omega, harmonics, n_time, tol, max_iter)
+        forcing = None
+        if forced:
+            ratios = np.zeros(0) if excitation_harmonics is None else excitation_harmonics
+            forcing = forcing_rows(ratios, a.size, harmonics, excitation_kind, excitation_mean)
+        y, base, converged = _multi_harmonic(
+            a, table, omega, harmonics, n_time, tol, max_iter, forcing
+        )
         omega = y[..., 1]
-        damping = base / (2.0 * omega**2 * a)
+        with np.errstate(over="ignore", invalid="ignore"):  # NaN or inf: not converged
+            damping = base / (2.0 * omega**2 * a)
         cos_m = np.concatenate([y[..., :1], np.broadcast_to(a, omega.shape)[..., None],
                                 y[..., 2::2]], axis=-1)  # fmt: skip
         sin_m = np.concatenate([np.zeros((*omega.shape, 2)), y[..., 3::2]], axis=-1)
         sin_m[~converged] = np.nan
         cos_m[~converged] = np.nan
-    base_acceleration = 2.0 * omega**2 * a * damping
+    with np.errstate(over="ignore", invalid="ignore"):
+        base_acceleration = 2.0 * omega**2 * a * damping
     squeeze = (lambda z: z[0]) if parameters is None else (lambda z: z)
     return HarmonicBackbone(
         amplitude_m=a,

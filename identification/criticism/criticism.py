@@ -1,34 +1,44 @@
-"""Model criticism: where a joint model fails, and which physical effect it lacks.
+"""Model criticism: where a joint model fails, which physics it lacks, and when the
+catalogue does not explain it.
 
-A misspecification check says *that* a model is wrong; this module says *which
-physics* is missing. The loop a user runs::
+The loop a user runs::
 
-    crit = criticize(model, measured)   # compare, locate, rank
-    crit.where()            # amplitude ranges where the residual beats the scatter
-    crit.missing()          # catalogue effects that pay for their complexity, best first
-    crit2 = crit.add("microslip")                        # refit with it, look again
-    plot_history(crit2.history, ax)                      # the error falling
+    crit = criticize(model, measured)   # compare, decide, locate, rank
+    crit.verdict, crit.where()          # calibrated: nothing missing / explained / …
+    crit.missing()                      # catalogue effects that explain it, best first
+    crit2 = crit.add("microslip")       # refit with it, look again
+    plot_history(crit2.history, ax)     # the error falling
 
-* **Compare.** The model's harmonic-balance backbone against the measured curves
-  at the measured amplitudes; the residual averaged over curves at amplitude
-  levels with its standard error from the scatter across curves (and, given
-  posterior draws, the posterior-predictive band and its coverage).
-* **Where.** Runs of consecutive levels where the mean residual exceeds
-  ``z`` standard errors, per channel, in words and as data.
-* **Missing.** Every catalogue effect the model lacks is added and the extended
-  model refitted (:func:`identification.fitting.least_squares.fit_backbones`); the error
-  reduction and the change of an information criterion against the refitted model
-  without it (BIC by default) rank them. Only effects with ``ΔIC`` below ``threshold``
-  (default −10: "very strong" evidence) are proposed. Each gets the signature it
-  leaves (the change of the predicted backbone it brings, beside the residual)
-  and a reading made from that signature and the catalogue
-  (:mod:`identification.criticism.readings`).
-* **Harmonics.** Backbones cannot separate some effects (``x²`` and ``x³`` both
-  soften or harden in ``a²``). Backbones extracted from test records keep the
-  second and third harmonics of the response their hold fits measured; they
-  enter the fit as a third channel: ``x²`` leaves a second harmonic phase-locked
-  to the fundamental, ``x³`` a third. (The mean displacement an even term also
-  leaves is invisible to velocity sensors.)
+**One statistic.** Everything is judged by one likelihood
+(:mod:`identification.fitting.data`): the residual of the *mean* curve at common
+amplitude levels with the covariance of that mean — the between-curve scatter over
+the number of curves (points of a curve share its assembly's offsets), shrunk and
+floored, plus stated systematic floors. The base model's structure is refitted in
+it; every candidate is refitted in it; ``where()`` reads its standardised residual.
+
+**One decision, calibrated.** Around the refitted base model
+(:mod:`identification.criticism.calibration`), the gain in ``χ²`` of the best
+catalogue column (every effect over its shape grid, linearised) and of a free-form
+reference (smooth equivalent stiffness, damping and harmonics against amplitude)
+are compared with their distribution under the refitted model itself: a parametric
+bootstrap of whole campaigns, the covariance re-estimated on each. Something is
+missing when either gain exceeds its threshold (set so that a null campaign fires
+with probability ``alpha``) *and* ``where()`` finds a level beyond its own
+calibrated bound. Threshold, ``alpha`` and the bootstrap size come with the verdict.
+
+**Explained, or not.** Significant candidates are refitted (nonlinear) and judged:
+admissible as physics (non-negative damping over the tested range, friction
+opposing motion, no cancelling terms: :mod:`identification.criticism.adequacy`),
+no channel worse beyond its noise, residual within the calibrated scatter in every
+channel, and the share of the reference's gain they capture
+(:func:`identification.criticism.reference.explained_share`). The verdict is
+"explained" (adequate, share ≥ :data:`EXPLAINED`), "partly explained" (share ≥
+:data:`PARTLY`), "not explained by the catalogue", or "nothing missing"; a candidate
+that improves the fit without being admissible or adequate is listed as "improves
+the fit but does not explain it" and never proposed. Candidates whose signatures the
+data cannot separate form **groups** (a ranking inside a group is not a finding),
+with what would separate them. Up- and down-stepped branches that differ by time,
+not amplitude, are reported as **drift** (:mod:`identification.criticism.drift`).
 
 Figures are drawn by :mod:`identification.criticism.plots`; posterior draws from
 PyMC come in through ``pm_joint``'s adapter (this engine imports no PyMC).
@@ -36,9 +46,10 @@ PyMC come in through ``pm_joint``'s adapter (this engine imports no PyMC).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -47,10 +58,26 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from identification.artifacts import atomic_write_text
+from identification.criticism import calibration as cal
+from identification.criticism.adequacy import admissibility, no_solution
+from identification.criticism.directions import (
+    base_jacobian,
+    candidate_directions,
+    mean_prediction,
+    reference_directions,
+)
+from identification.criticism.drift import Drift, branch_drift
 from identification.criticism.plots import write_figures
 from identification.criticism.readings import CHANNEL_LABELS, _reading
+from identification.criticism.reference import FreeForm, explained_share, fit_reference
 from identification.effects import CATALOGUE, get_effect
-from identification.fitting.data import BACKBONE_CHANNELS, HARMONIC_ORDERS, FitData, fit_data
+from identification.fitting.data import (
+    BACKBONE_CHANNELS,
+    HARMONIC_ORDERS,
+    FitData,
+    Metric,
+    fit_data,
+)
 from identification.fitting.least_squares import FitResult, default_free, evaluate, fit_backbones
 from identification.fitting.prediction import predict_channels, resolve_method
 from identification.measurements.backbone import BackboneSet
@@ -59,20 +86,40 @@ from identification.measurements.records import Record
 from identification.model import JointModel
 
 __all__ = [
-    "AMBIGUITY",
-    "DEFAULT_THRESHOLD",
+    "ALPHA",
+    "EXPLAINED",
+    "N_BOOTSTRAP",
+    "PARTLY",
     "Candidate",
     "Criticism",
     "FailureRange",
+    "Group",
     "Step",
     "criticize",
 ]
 
 FORMAT = "pm-joint/criticism"
-#: ΔIC below which an effect is proposed (BIC: < −10 is "very strong" evidence).
-DEFAULT_THRESHOLD = -10.0
-#: Candidates within this ΔIC of the best are reported as not clearly separated.
-AMBIGUITY = 6.0
+ALPHA = cal.ALPHA
+N_BOOTSTRAP = cal.N_BOOTSTRAP
+#: Share of the free-form reference's gain an adequate candidate must capture to explain the data.
+EXPLAINED = 0.8
+#: Share below which the catalogue does not explain the data ("partly explained" between).
+PARTLY = 0.5
+#: Separation statistic (χ²₁, 1 %) below which the data cannot tell two candidates apart.
+SEPARATION = 6.63
+#: A channel is made worse beyond its noise when its χ² ends beyond its calibrated bound and
+#: rises by more than this (χ²₁, 1 %) and by more than its value before (it doubles).
+WORSE = 6.63
+#: Candidates refitted (nonlinear) at most, best linearised gains first.
+MAX_REFITS = 8
+#: Verdicts.
+VERDICTS = (
+    "nothing missing",
+    "drift",
+    "explained",
+    "partly explained",
+    "not explained by the catalogue",
+)
 
 
 # --------------------------------------------------------------------------
@@ -81,11 +128,12 @@ AMBIGUITY = 6.0
 
 @dataclass(frozen=True)
 class FailureRange:
-    """An amplitude range where the model misses the measurement beyond the scatter.
+    """An amplitude range where the model misses the measurement beyond the calibrated bound.
 
     ``max_residual`` is measured minus predicted at the worst level, in the
     channel's SI unit (Hz, damping ratio, fraction of the fundamental for the
-    harmonics, where it is the magnitude of the complex miss).
+    harmonics, where it is the magnitude of the complex miss); ``max_z`` its
+    standardised size (the bound is the criticism's ``where`` threshold).
     """
 
     channel: str
@@ -93,6 +141,7 @@ class FailureRange:
     to_mm: float
     max_residual: float
     direction: str
+    max_z: float = float("nan")
 
     @property
     def text(self) -> str:
@@ -116,6 +165,7 @@ class FailureRange:
             "from_mm": self.from_mm,
             "to_mm": self.to_mm,
             "max_residual": self.max_residual,
+            "max_z": self.max_z,
             "direction": self.direction,
             "text": self.text,
         }
@@ -123,58 +173,117 @@ class FailureRange:
 
 @dataclass(frozen=True)
 class Candidate:
-    """A catalogue effect added to the model and refitted.
+    """A catalogue effect tried against the data.
 
     Attributes
     ----------
     effect
         Catalogue name.
-    fit
-        The refitted extended model.
-    base
-        The refitted model without it (same harmonic-balance method).
-    criterion, delta_ic
-        Information criterion and its change ``IC(fit) − IC(base)`` (negative: better).
-    proposed
-        Whether ``delta_ic`` is below the threshold.
+    gain
+        The decision statistic of this effect: the linearised ``χ²`` gain of its best
+        column (over its shape grid) at the refitted base model.
+    shape
+        Shape values of that column.
+    significant
+        ``gain`` above the calibrated catalogue threshold.
+    fit, base
+        The nonlinear refit with the effect (None where it was not refitted) and the
+        refitted base model (same harmonic-balance method).
+    delta_chi2
+        ``χ²(base) − χ²(fit)`` in the likelihood's metric (None without a refit).
+    delta_ic, criterion
+        The fits' information-criterion change (descriptive only; decisions are calibrated).
+    channel_chi2
+        Post-fit ``χ²`` per channel group, before and after: ``{group: (before, after)}``.
+    problems
+        What makes the fit inadmissible as physics (empty: admissible).
+    worse
+        Channel groups the effect makes worse beyond their noise.
+    beyond
+        Channel groups whose residual stays beyond the calibrated scatter after adding it
+        (empty: adequate).
+    share
+        Share of the free-form reference's gain it captures.
+    status
+        ``"explained"``, ``"partly explained"`` (the proposed group), ``"not preferred"``
+        (it would do, but the data prefer the proposed group), ``"improves the fit but
+        does not explain it"`` (inadmissible, a channel worse, or not significant on its
+        own), ``"not explained by the catalogue"`` (too small a share) or
+        ``"not significant"``.
     signature
-        Per channel, at the levels: ``prediction(fit) − prediction(base)``, the
-        change the effect brings; it should look like the base model's residual.
+        Per channel at the levels: the mean prediction with the effect minus without it.
     reading
-        Physical reading made specific to the evidence.
+        What it does in this test and what it is consistent with (:mod:`.readings`).
     """
 
     effect: str
-    fit: FitResult
+    gain: float
+    shape: dict[str, float]
+    significant: bool
     base: FitResult
     criterion: str
-    delta_ic: float
-    proposed: bool
-    signature: dict[str, np.ndarray]
-    reading: str
+    fit: FitResult | None = None
+    delta_chi2: float | None = None
+    delta_ic: float | None = None
+    channel_chi2: dict[str, tuple[float, float]] = field(default_factory=dict)
+    problems: tuple[str, ...] = ()
+    worse: tuple[str, ...] = ()
+    beyond: tuple[str, ...] | None = None
+    share: float | None = None
+    status: str = "not significant"
+    signature: dict[str, np.ndarray] = field(default_factory=dict)
+    reading: str = ""
+
+    @property
+    def proposed(self) -> bool:
+        return self.status in ("explained", "partly explained")
+
+    @property
+    def adequate(self) -> bool | None:
+        """Residual within the calibrated scatter in every channel group after adding it."""
+        return None if self.beyond is None else not self.beyond
 
     @property
     def n_new_parameters(self) -> int:
-        return self.fit.n_parameters - self.base.n_parameters
+        return 0 if self.fit is None else self.fit.n_parameters - self.base.n_parameters
 
     @property
     def error_reduction(self) -> dict[str, float]:
         """Fractional RMSE reduction per channel against the refitted base model."""
-        out = {}
-        for key, before, after in _rmse_pairs(self.base, self.fit):
-            out[key] = float(1.0 - after / before) if before > 0 else 0.0
-        return out
+        if self.fit is None:
+            return {}
+        return {
+            key: float(1.0 - after / before) if before > 0 else 0.0
+            for key, before, after in _rmse_pairs(self.base, self.fit)
+        }
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        out = {
             "effect": self.effect,
+            "status": self.status,
+            "gain": self.gain,
+            "shape": self.shape,
+            "significant": self.significant,
+            "proposed": self.proposed,
+        }
+        if self.fit is None:
+            return out
+        pairs = list(_rmse_pairs(self.base, self.fit))
+        return out | {
+            "delta_chi2": self.delta_chi2,
+            "explained_share": self.share,
+            "adequate": self.adequate,
+            "beyond_scatter": list(self.beyond or ()),
+            "admissible": not self.problems,
+            "problems": list(self.problems),
+            "worse": list(self.worse),
+            "channel_chi2": {k: list(v) for k, v in self.channel_chi2.items()},
             "error_reduction": self.error_reduction,
             "delta_information_criterion": self.delta_ic,
             "criterion": self.criterion,
-            "proposed": self.proposed,
             "reading": self.reading,
-            "rmse_before": {k: b for k, b, _ in _rmse_pairs(self.base, self.fit)},
-            "rmse_after": {k: a for k, _, a in _rmse_pairs(self.base, self.fit)},
+            "rmse_before": {k: b for k, b, _ in pairs},
+            "rmse_after": {k: a for k, _, a in pairs},
             "parameters": self.fit.model.parameters,
             "equation": self.fit.model.equation(),
             "signature": {k: v.tolist() for k, v in self.signature.items()},
@@ -182,12 +291,35 @@ class Candidate:
 
 
 def _rmse_pairs(before: FitResult, after: FitResult):
-    for key in ("frequency_hz", "damping_ratio", "harmonics"):
-        attribute = {"frequency_hz": "frequency_rmse_hz", "damping_ratio": "damping_rmse",
-                     "harmonics": "harmonic_rmse"}[key]  # fmt: skip
+    for key, attribute in (("frequency_hz", "frequency_rmse_hz"), ("damping_ratio", "damping_rmse"),
+                           ("harmonics", "harmonic_rmse")):  # fmt: skip
         b, a = getattr(before, attribute), getattr(after, attribute)
         if b is not None and a is not None:
             yield key, float(b), float(a)
+
+
+@dataclass(frozen=True)
+class Group:
+    """Candidates the data cannot separate, and what would."""
+
+    effects: tuple[str, ...]
+    separation: dict[str, float]
+    separated_by: str
+
+    @property
+    def text(self) -> str:
+        return (
+            f"the data cannot separate {', '.join(self.effects)} (a ranking among them is not "
+            f"a finding); what would: {self.separated_by}"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "effects": list(self.effects),
+            "separation": self.separation,
+            "separated_by": self.separated_by,
+            "text": self.text,
+        }
 
 
 @dataclass(frozen=True)
@@ -237,6 +369,8 @@ class Criticism:
         The model as given against the data (no refit).
     history
         Steps of the loop so far, this model last.
+    previous_rounds
+        The earlier rounds' reports (:meth:`round_report`), first first.
     """
 
     def __init__(
@@ -248,26 +382,34 @@ class Criticism:
         weights: Mapping[str, float] | None = None,
         candidates: Sequence[str] | None = None,
         criterion: str = "bic",
-        threshold: float = DEFAULT_THRESHOLD,
-        z: float = 2.0,
+        alpha: float = ALPHA,
+        n_bootstrap: int = N_BOOTSTRAP,
+        seed: int = 0,
         posterior: tuple[list[str], np.ndarray] | None = None,
+        posterior_kind: str = "population",
         history: Sequence[Step] = (),
+        rounds: Sequence[Mapping[str, Any]] = (),
         action: str | None = None,
         prefitted: Mapping[str, FitResult] | None = None,
     ) -> None:
         if criterion not in ("aic", "bic"):
             raise ValueError(f"criterion must be 'aic' or 'bic', got {criterion!r}")
-        if not np.isfinite(threshold):
-            raise ValueError(f"threshold must be finite, got {threshold}")
+        if posterior_kind not in ("population", "mean"):
+            raise ValueError(
+                f"posterior_kind must be 'population' or 'mean', got {posterior_kind!r}"
+            )
         self.model = model
         self.data = data
         self.method = method
         self.weights = dict(weights or {})
         self.criterion = criterion
-        self.threshold = float(threshold)
-        self.z = float(z)
+        self.alpha = float(alpha)
+        self.n_bootstrap = int(n_bootstrap)
+        self.seed = int(seed)
         self.posterior = posterior
+        self.posterior_kind = posterior_kind
         self.candidate_effects = _candidate_list(model, candidates)
+        self.previous_rounds = [dict(r) for r in rounds]
         self._prefitted = dict(prefitted or {})
         self.fit = evaluate(
             model, data, method=method, weights=weights, n_parameters=len(default_free(model))
@@ -287,111 +429,226 @@ class Criticism:
             previous.pop()  # the same model criticised again: one step
         self.history: list[Step] = [*previous, step]
 
+    # ------------------------------------------------------------ the base model
+    def _method_for(self, model: JointModel) -> str:
+        return resolve_method(self.method, model, self.data)
+
+    def _base_fit(self, method: str) -> FitResult:
+        """The criticised model's structure refitted (once per harmonic-balance method);
+        with a posterior, the posterior median as given (the posterior is what is judged)."""
+        key = f"base:{method}"
+        if key not in self._prefitted:
+            if self.posterior is not None:
+                self._prefitted[key] = evaluate(
+                    self.model, self.data, method=method, weights=self.weights or None,
+                    n_parameters=len(default_free(self.model)),
+                )  # fmt: skip
+            else:
+                self._prefitted[key] = fit_backbones(
+                    self.model, self.data, method=method, weights=self.weights or None
+                )
+        return self._prefitted[key]
+
+    @cached_property
+    def base(self) -> FitResult:
+        """The refitted base model (the posterior median with a posterior): what the
+        statistics, ``where()`` and the comparison judge."""
+        return self._base_fit(self._method_for(self.model))
+
+    @cached_property
+    def _weight_vector(self) -> np.ndarray:
+        return self.base.weights
+
+    @cached_property
+    def metric(self) -> Metric:
+        """The likelihood's metric, widened by a posterior's population-mean uncertainty."""
+        metric = self.data.metric(self._weight_vector)
+        if self.posterior is None:
+            return metric
+        names, draws = self.posterior
+        samples = predict_channels(
+            self.model, self.data.amplitude_m, self.data.channels, method=self.base.method,
+            parameters=draws, names=names,
+        )  # fmt: skip
+        tables = mean_prediction(self.data, samples).reshape(len(draws), -1)[:, metric.keep]
+        ok = np.isfinite(tables).all(axis=1)
+        spread = np.cov(tables[ok].T) if ok.sum() > 1 else np.zeros((metric.size,) * 2)
+        if self.posterior_kind == "population":
+            # The draws spread like the population; its mean curve is known to 1/n of that.
+            spread = spread / self.data.n_curves
+        return Metric(metric.keep, metric.weights, metric.covariance.widened(np.atleast_2d(spread)))
+
+    # ------------------------------------------------------------ the statistics
+    @cached_property
+    def problem(self) -> cal.Problem:
+        """The linearised problem at the refitted base model."""
+        base = self.base
+        metric = self.metric
+        free = list(base.free) or default_free(base.model)
+        jacobian = base_jacobian(base.model, free, self.data, base.method, metric)
+        columns, directions = candidate_directions(
+            base.model, self.candidate_effects, self.data, base.method, metric
+        )
+        reference, channels = reference_directions(self.data, metric)
+        return cal.Problem.build(
+            self.data, metric, self.data.mean_residual(base.predicted), jacobian,
+            columns, directions, reference, channels,
+        )  # fmt: skip
+
+    @cached_property
+    def observed(self) -> cal.Statistics:
+        """The statistics of the measured campaign."""
+        problem = self.problem
+        covariance = problem.metric.covariance.mean[None]
+        return cal.statistics(problem, problem.residual[None], covariance, keep_frame=True)
+
+    @cached_property
+    def calibration(self) -> cal.Calibration:
+        """Thresholds by parametric bootstrap under the refitted base model."""
+        return cal.calibrate(
+            self.problem, self.observed, alpha=self.alpha, n_bootstrap=self.n_bootstrap,
+            seed=self.seed,
+        )  # fmt: skip
+
+    @cached_property
+    def effect_gains(self) -> dict[str, tuple[float, int]]:
+        """Per candidate effect: its best column's gain and the column's index."""
+        gains = self.observed.column_gain[0]
+        out = {}
+        for i, direction in enumerate(self.problem.directions):
+            if direction.effect not in out or gains[i] > out[direction.effect][0]:
+                out[direction.effect] = (float(gains[i]), i)
+        return out
+
+    @property
+    def threshold(self) -> float:
+        """The calibrated catalogue threshold (a ``χ²`` gain)."""
+        return self.calibration.catalogue_threshold
+
+    @cached_property
+    def p_value(self) -> float:
+        """Bootstrap p-value of the decision (catalogue and reference tests combined)."""
+        return self.calibration.p_value(self.observed.catalogue[0], self.observed.reference[0])
+
     # ---------------------------------------------------------------- compare
     @cached_property
     def comparison(self) -> dict[str, dict[str, np.ndarray]]:
-        """Per channel at the levels: measured mean, prediction, residual, standard error
-        (and ``band_low``/``band_high``/``coverage`` with a posterior)."""
+        """Per channel at the levels: measured mean, prediction of the base model (refitted,
+        or the posterior median), residual, standard error (and ``band_low``/``band_high``/
+        ``coverage`` with a posterior)."""
         data = self.data
-        mean_residual, standard_error = self.fit.level_residual()
+        mean_residual = data.mean_residual(self.base.predicted)
         measured_mean, _ = data.level_mean(data.values)
-        method = self.fit.method
-        predicted = predict_channels(self.model, data.levels_m, data.channels, method=method)
+        se = self._standard_error
+        predicted = mean_prediction(data, self.base.predicted)
         out = {}
         band = None
         if self.posterior is not None:
             names, draws = self.posterior
             samples = predict_channels(
-                self.model, data.levels_m, data.channels, method=method, parameters=draws,
-                names=names,
+                self.model, data.levels_m, data.channels, method=self.base.method,
+                parameters=draws, names=names,
             )  # fmt: skip
             band = np.nanquantile(samples, [0.025, 0.975], axis=0)
-            spread = np.nanstd(samples, axis=0)
-            curves = data.at_levels(data.values)
+            curves = data.curves_at_levels
         for j, channel in enumerate(data.channels):
             entry = {
                 "measured_mean": measured_mean[:, j],
                 "predicted": predicted[:, j],
                 "residual": mean_residual[:, j],
-                "standard_error": standard_error[:, j],
+                "standard_error": se[:, j],
             }
             if band is not None:
                 inside = (curves[:, :, j] >= band[0][:, j]) & (curves[:, :, j] <= band[1][:, j])
                 entry |= {
                     "band_low": band[0][:, j],
                     "band_high": band[1][:, j],
-                    "predictive_std": spread[:, j],
                     "coverage": np.mean(inside, axis=0),
                 }
             out[channel] = entry
         return out
 
+    @cached_property
+    def _standard_error(self) -> np.ndarray:
+        """``(n_levels, n_channels)`` standard error of the mean curve in the metric."""
+        table = np.full(self.metric.keep.size, np.nan)
+        table[self.metric.keep] = self.metric.covariance.standard_error
+        return table.reshape(self.data.levels_m.size, -1)
+
     def residual(self, channel: str) -> tuple[np.ndarray, np.ndarray]:
-        """Mean residual (measured − model) of a channel at the levels and its standard
-        error (scatter across curves, combined with the posterior spread if given)."""
+        """Mean residual (measured − base model) of a channel at the levels and its standard
+        error (the likelihood's, widened by a posterior's population-mean uncertainty)."""
         entry = self.comparison[channel]
-        se = entry["standard_error"]
-        if "predictive_std" in entry:
-            se = np.hypot(se, entry["predictive_std"])
-        return entry["residual"], se
+        return entry["residual"], entry["standard_error"]
+
+    @cached_property
+    def _standardised(self) -> np.ndarray:
+        """``(n_levels, n_channels)`` post-fit residual over its standard error."""
+        table = np.full(self.metric.keep.size, np.nan)
+        table[self.metric.keep] = self.observed.standardised[0]
+        return table.reshape(self.data.levels_m.size, -1)
 
     def where(self) -> list[FailureRange]:
-        """Amplitude ranges where the mean residual exceeds ``z`` standard errors.
-
-        A range is a run of at least two consecutive levels (one when there are
-        only three levels) with a significant residual of one sign; the
-        harmonics count per order, their cosine and sine parts together.
-        """
+        """Amplitude ranges where the refitted model's standardised residual exceeds the
+        calibrated bound (runs of consecutive levels of one sign; a harmonic order fails
+        where its cosine or sine part does)."""
+        bound = self.calibration.where_bound
         levels_mm = 1e3 * self.data.levels_m
-        min_run = 1 if levels_mm.size <= 3 else 2
+        z = self._standardised
         ranges = []
         for channel in BACKBONE_CHANNELS:
-            residual, se = self.residual(channel)
-            significant = np.abs(residual) > self.z * se
-            sign = np.sign(residual) * significant
-            for start, stop in _runs(sign, min_run):
-                worst = start + int(np.argmax(np.abs(residual[start:stop])))
+            j = self.data.column(channel)
+            residual, _ = self.residual(channel)
+            significant = np.abs(np.nan_to_num(z[:, j])) > bound
+            for start, stop in _runs(np.sign(residual) * significant, 1):
+                worst = start + int(np.argmax(np.abs(z[start:stop, j])))
                 ranges.append(
                     FailureRange(
                         channel, float(levels_mm[start]), float(levels_mm[stop - 1]),
                         float(residual[worst]),
                         "under-predicted" if residual[worst] > 0 else "over-predicted",
+                        float(abs(z[worst, j])),
                     )
                 )  # fmt: skip
         if self.data.has_harmonics:
             for order in HARMONIC_ORDERS:
-                parts = [self.residual(f"harmonic{order}_{p}") for p in ("cos", "sin")]
-                miss = np.hypot(parts[0][0], parts[1][0])
-                significant = np.any([np.abs(r) > self.z * s for r, s in parts], axis=0)
+                columns = [self.data.column(f"harmonic{order}_{p}") for p in ("cos", "sin")]
+                parts = np.abs(np.nan_to_num(z[:, columns])).max(axis=1)
+                miss = np.hypot(*(self.comparison[f"harmonic{order}_{p}"]["residual"]
+                                  for p in ("cos", "sin")))  # fmt: skip
                 measured = np.hypot(*(self.comparison[f"harmonic{order}_{p}"]["measured_mean"]
                                       for p in ("cos", "sin")))  # fmt: skip
                 predicted = np.hypot(*(self.comparison[f"harmonic{order}_{p}"]["predicted"]
                                        for p in ("cos", "sin")))  # fmt: skip
-                for start, stop in _runs(significant.astype(float), min_run):
-                    worst = start + int(np.argmax(miss[start:stop]))
+                for start, stop in _runs((parts > bound).astype(float), 1):
+                    worst = start + int(np.argmax(parts[start:stop]))
                     ranges.append(
                         FailureRange(
                             f"harmonic{order}", float(levels_mm[start]),
                             float(levels_mm[stop - 1]), float(miss[worst]),
                             "under-predicted" if measured[worst] > predicted[worst]
-                            else "over-predicted",
+                            else "over-predicted", float(parts[worst]),
                         )
                     )  # fmt: skip
         return ranges
 
+    # ---------------------------------------------------------------- decide
+    @cached_property
+    def fires(self) -> dict[str, bool]:
+        """Which calibrated tests fire: the catalogue's, the reference's, ``where()``'s."""
+        return {
+            "catalogue": bool(self.observed.catalogue[0] > self.calibration.catalogue_threshold),
+            "reference": bool(self.observed.reference[0] > self.calibration.reference_threshold),
+            "where": bool(self.where()),
+        }
+
+    @property
+    def significant(self) -> bool:
+        """Whether something is missing: a calibrated test fires and ``where()`` locates it."""
+        fires = self.fires
+        return (fires["catalogue"] or fires["reference"]) and fires["where"]
+
     # ---------------------------------------------------------------- missing
-    def _method_for(self, model: JointModel) -> str:
-        return resolve_method(self.method, model, self.data)
-
-    def _base_fit(self, method: str) -> FitResult:
-        """The criticised model's structure refitted (once per harmonic-balance method)."""
-        key = f"base:{method}"
-        if key not in self._prefitted:
-            self._prefitted[key] = fit_backbones(
-                self.model, self.data, method=method, weights=self.weights or None
-            )
-        return self._prefitted[key]
-
     def _extended_fit(self, effect: str, **shape: float) -> FitResult:
         key = f"add:{effect}"
         if shape or key not in self._prefitted:
@@ -413,89 +670,321 @@ class Criticism:
             self._prefitted[key] = result
         return self._prefitted[key]
 
+    def _flat_residual(self, fit: FitResult) -> np.ndarray:
+        metric = self.metric
+        return metric.weights * self.data.mean_residual(fit.predicted).reshape(-1)[metric.keep]
+
+    def _channel_chi2(self, fit: FitResult) -> dict[str, float]:
+        """Post-fit ``χ²`` per channel group in the metric (NaN entries count as failures)."""
+        residual = self._flat_residual(fit)
+        se = self.metric.covariance.standard_error * self.metric.weights
+        residual = np.where(np.isfinite(residual), residual, 1e3 * se)
+        covariance = self.problem.weighted(self.metric.covariance.mean)
+        out = {}
+        for g, group in enumerate(cal.GROUPS):
+            rows = np.flatnonzero(self.problem.group_of == g)
+            if rows.size:
+                block = np.linalg.cholesky(covariance[np.ix_(rows, rows)])
+                out[group] = float(np.sum(np.linalg.solve(block, residual[rows]) ** 2))
+        return out
+
+    def _chi2(self, fit: FitResult) -> float:
+        z = self.metric.whiten(self.data.mean_residual(fit.predicted))
+        return float(z @ z)
+
+    @cached_property
+    def _to_refit(self) -> list[str]:
+        """Effects refitted: the significant ones (best gains first), or, when only the
+        reference fires, the two best (for the share the catalogue captures)."""
+        if not self.significant:
+            return []
+        order = sorted(self.effect_gains, key=lambda e: -self.effect_gains[e][0])
+        chosen = [e for e in order if self.effect_gains[e][0] > self.threshold]
+        return (chosen or order[:2])[:MAX_REFITS]
+
     def _candidate(self, effect: str) -> Candidate:
+        gain, column = self.effect_gains[effect]
+        shape = dict(self.problem.directions[column].shape)
+        significant = gain > self.threshold
+        if effect not in self._to_refit:
+            return Candidate(effect, gain, shape, significant, self.base, self.criterion)
         fit = self._extended_fit(effect)
         base = self._base_fit(fit.method)
-        delta = float(fit.information_criterion(self.criterion) - base.information_criterion(
-            self.criterion))  # fmt: skip
-        levels = self.data.levels_m
-        channels = self.data.channels
-        ext = predict_channels(fit.model, levels, channels, method=fit.method)
-        without = predict_channels(base.model, levels, channels, method=fit.method)
+        levels, channels = self.data.levels_m, self.data.channels
+        ext = mean_prediction(self.data, fit.predicted)
+        without = mean_prediction(self.data, base.predicted)
         signature = {c: ext[:, j] - without[:, j] for j, c in enumerate(channels)}
+        before, after = self._channel_chi2(base), self._channel_chi2(fit)
+        bounds = self.calibration.channel_bounds
+        # Worse beyond the noise: pushed beyond the calibrated scatter by more than χ²₁'s 1 %
+        # quantile, and by more than the misfit it had (a channel already far off may move
+        # while a second missing effect is still unexplained; doubling is not a trade-off).
+        worse = tuple(
+            g
+            for g in after
+            if after[g] > bounds.get(g, np.inf) and after[g] - before[g] > max(WORSE, before[g])
+        )
+        beyond = tuple(g for g in after if after[g] > bounds.get(g, np.inf))
+        f, z = self.data.column("frequency_hz"), self.data.column("damping_ratio")
+        problems = tuple(admissibility(fit.model, levels, ext[:, f], ext[:, z]))
+        delta = self._chi2(base) - self._chi2(fit)
+        share = explained_share(
+            delta, fit.n_parameters - base.n_parameters, self.observed.reference[0],
+            self.observed.reference_rank,
+        )  # fmt: skip
+        # No share where the reference gains nothing beyond noise: nothing left to capture.
+        captured = 1.0 if share is None else share
+        if problems or worse or not significant:
+            status = "improves the fit but does not explain it"
+        elif captured >= EXPLAINED and not beyond:
+            status = "explained"
+        elif captured >= PARTLY:
+            status = "partly explained"
+        else:
+            status = "not explained by the catalogue"
         # The effect's own contribution (the rest of the refitted model kept) for the words.
         alone = predict_channels(fit.model.without(effect), levels, channels, method=fit.method)
-        own = ext - alone if np.isfinite(alone).all() else ext - without
+        own_points = predict_channels(fit.model, levels, channels, method=fit.method) - alone
+        own = own_points if np.isfinite(alone).all() else ext - without
         return Candidate(
             effect=effect,
-            fit=fit,
+            gain=gain,
+            shape=shape,
+            significant=significant,
             base=base,
             criterion=self.criterion,
-            delta_ic=delta,
-            proposed=bool(delta < self.threshold),
+            fit=fit,
+            delta_chi2=delta,
+            delta_ic=float(
+                fit.information_criterion(self.criterion)
+                - base.information_criterion(self.criterion)
+            ),
+            channel_chi2={g: (before[g], after[g]) for g in after},
+            problems=problems,
+            worse=worse,
+            beyond=beyond,
+            share=share,
+            status=status,
             signature=signature,
-            reading=_reading(effect, fit.model, dict(zip(channels, own.T, strict=True)), self.data),
+            reading=_reading(
+                effect, fit.model, dict(zip(channels, own.T, strict=True)), self.data, problems
+            ),
         )
 
     @cached_property
     def candidates(self) -> list[Candidate]:
-        """Every candidate effect refitted, best first.
-
-        Best is the lowest ΔIC, except that among proposed effects the data do not
-        clearly separate from the best (ΔIC within :data:`AMBIGUITY`), the one with
-        fewer new parameters comes first: a Stribeck law with a huge ``v_s`` *is*
-        Coulomb friction, and noise alone must not make the richer law win.
-        """
-        ranked = sorted((self._candidate(e) for e in self.candidate_effects),
-                        key=lambda c: c.delta_ic)  # fmt: skip
-        if not ranked or not ranked[0].proposed:
-            return ranked
-        close = [c for c in ranked if c.proposed and c.delta_ic < ranked[0].delta_ic + AMBIGUITY]
-        close.sort(key=lambda c: (c.n_new_parameters, c.delta_ic))
-        return close + ranked[len(close) :]
+        """Every candidate effect, best first: the proposed group (candidates the data cannot
+        separate from the best one, fewest new parameters first), then the other refitted
+        ones by their ``χ²`` gain — those that would do but that the data separate from the
+        best are "not preferred" — then the rest by their linearised gain."""
+        tried = [self._candidate(e) for e in self.candidate_effects]
+        refitted = sorted((c for c in tried if c.fit is not None), key=lambda c: -c.delta_chi2)
+        proposable = [c for c in refitted if c.proposed]
+        if proposable:
+            group = set(self._group_of(proposable))
+            first = sorted((c for c in proposable if c.effect in group),
+                           key=lambda c: (c.n_new_parameters, -c.delta_chi2))  # fmt: skip
+            rest = [
+                dataclasses.replace(c, status="not preferred") if c.proposed else c
+                for c in refitted
+                if c.effect not in group
+            ]
+            refitted = first + rest
+        others = sorted((c for c in tried if c.fit is None), key=lambda c: -c.gain)
+        return refitted + others
 
     def missing(self) -> list[Candidate]:
-        """The effects worth adding (ΔIC below the threshold), best first."""
+        """The effects proposed ("explained" or "partly explained"), best first."""
+        if not self.significant:
+            return []
         return [c for c in self.candidates if c.proposed]
 
-    @property
-    def significant(self) -> bool:
-        """Whether some effect is missing (False: nothing significant missing)."""
-        return bool(self.missing())
+    # ---------------------------------------------------------------- groups
+    def _separation(self, best: Candidate, other: Candidate) -> float:
+        """χ² gain of ``best`` over a model that already has ``other`` (linearised at the
+        base, along their fitted signatures): small when the data cannot tell them apart."""
+        keep, weights = self.metric.keep, self.metric.weights
+        columns = np.column_stack(
+            [weights * np.stack(list(c.signature.values()), axis=1).reshape(-1)[keep]
+             for c in (best, other)]
+        )  # fmt: skip
+        columns = np.nan_to_num(columns)
+        projected = cal.project(self.observed, columns)
+        u, v = projected[:, 0], projected[:, 1]
+        if v @ v > 0:
+            u = u - v * (v @ u) / (v @ v)
+        norm = u @ u
+        return float((u @ self.observed.frame["z"]) ** 2 / norm) if norm > 0 else 0.0
+
+    def _group_of(self, proposed: list[Candidate]) -> list[str]:
+        best = proposed[0]
+        return [best.effect] + [
+            c.effect for c in proposed[1:] if self._separation(best, c) < SEPARATION
+        ]
+
+    @cached_property
+    def groups(self) -> list[Group]:
+        """Groups of proposed candidates the data cannot separate (each of two or more)."""
+        remaining = self.missing()
+        out = []
+        while remaining:
+            best = max(remaining, key=lambda c: c.delta_chi2)
+            members = [best] + [c for c in remaining if c is not best
+                                and self._separation(best, c) < SEPARATION]  # fmt: skip
+            if len(members) > 1:
+                out.append(
+                    Group(
+                        tuple(c.effect for c in members),
+                        {c.effect: self._separation(best, c) for c in members[1:]},
+                        self._what_separates(members),
+                    )
+                )
+            remaining = [c for c in remaining if c not in members]
+        return out
+
+    def _what_separates(self, members: Sequence[Candidate]) -> str:
+        """What measurement would separate the group, from where the fitted models'
+        predictions differ most relative to today's standard errors: a wider amplitude
+        range, the harmonics (their size or phase, or the records' harmonics where the
+        backbones carry none), or more accurate damping or frequency."""
+        first, *rest = members
+        return "; ".join(dict.fromkeys(self._separating(first, other) for other in rest))
+
+    def _separating(self, first: Candidate, other: Candidate) -> str:
+        data = self.data
+        a_lo, a_hi = data.levels_m[0], data.levels_m[-1]
+        outside = np.concatenate([np.geomspace(a_lo / 4, a_lo, 4)[:-1],
+                                  np.geomspace(a_hi, 3 * a_hi, 4)[1:]])  # fmt: skip
+        channels = BACKBONE_CHANNELS + tuple(
+            f"harmonic{h}_{p}" for h in HARMONIC_ORDERS for p in ("cos", "sin")
+        )
+        se = np.full((data.levels_m.size, len(channels)), data.noise_floor["harmonics"])
+        for j, channel in enumerate(channels):
+            if channel in data.channels and data.used[data.column(channel)]:
+                se[:, j] = self._standard_error[:, data.column(channel)]
+
+        def predict(c: Candidate, amplitudes: np.ndarray) -> np.ndarray:
+            return predict_channels(c.fit.model, amplitudes, channels, method="multi")
+
+        inside = np.abs(predict(first, data.levels_m) - predict(other, data.levels_m)) / se
+        edges = np.vstack([np.repeat(se[:1], 3, axis=0), np.repeat(se[-1:], 3, axis=0)])
+        beyond = np.abs(predict(first, outside) - predict(other, outside))[:, :2] / edges[:, :2]
+        names = f"{first.effect} and {other.effect}"
+        options = []
+        if np.isfinite(beyond).any():
+            i, j = np.unravel_index(np.nanargmax(beyond), beyond.shape)
+            options.append((
+                beyond[i, j] / 3,  # a test beyond today's range costs more: ask for more
+                f"a wider amplitude range ({names} differ by {beyond[i, j]:.2g} standard "
+                f"errors in {CHANNEL_LABELS[channels[j]][0]} at {1e3 * outside[i]:.2g} mm)",
+            ))  # fmt: skip
+        for j, (name, accuracy) in enumerate((("frequency", "frequency accuracy"),
+                                              ("damping", "damping accuracy"))):  # fmt: skip
+            options.append((
+                np.nanmax(inside[:, j]),
+                f"{accuracy} ({names} differ by at most {np.nanmax(inside[:, j]):.2g} standard "
+                f"errors of today's mean {name})",
+            ))  # fmt: skip
+        harmonic = np.nanmax(inside[:, 2:], axis=0)
+        j = int(np.argmax(harmonic))
+        order, part = channels[2 + j][len("harmonic")], channels[2 + j].rsplit("_", 1)[1]
+        what = (
+            f"the {order}{'nd' if order == '2' else 'rd'} harmonic's "
+            f"{'phase' if part == 'sin' else 'size'}, measured against a clean reference"
+            if data.has_harmonics
+            else "the 2nd and 3rd harmonics of the records (extract the backbones from them)"
+        )
+        options.append(
+            (harmonic[j], f"{what} ({names} differ there by {harmonic[j]:.2g} standard errors)")
+        )
+        score, text = max(options, key=lambda o: o[0])
+        if score < 0.5:
+            return (
+                f"nothing near this test: {names} coincide over and around its amplitudes "
+                f"(at most {score:.1g} standard errors apart in any channel)"
+            )
+        return text
 
     @property
     def ambiguous(self) -> list[dict[str, Any]]:
-        """Proposed effects the data do not clearly separate from the best one."""
+        """The groups as ``{effects, text}`` (the earlier report's name for them)."""
+        return [{"effects": list(g.effects), "text": g.text} for g in self.groups]
+
+    # ---------------------------------------------------------------- verdict
+    @cached_property
+    def reference(self) -> FreeForm:
+        """The free-form reference fitted to the data (its describing functions)."""
+        table = mean_prediction(self.data, self.base.predicted)
+        return fit_reference(self.problem, self.observed, self.data, table)
+
+    @cached_property
+    def drift(self) -> list[Drift]:
+        """Drift seen between up- and down-stepped branches (empty without both)."""
+        return branch_drift(self.data, self.alpha)
+
+    @property
+    def best(self) -> Candidate | None:
+        """The first proposed candidate, else the refitted one with the largest share."""
         proposed = self.missing()
-        if len(proposed) < 2:
-            return []
-        best = proposed[0]
-        out = []
-        for other in proposed[1:]:
-            gap = other.delta_ic - best.delta_ic
-            if gap < AMBIGUITY:
-                hint = (
-                    "the measured harmonics were used"
-                    if self.data.has_harmonics
-                    else "give backbones extracted from the test records: their 2nd and 3rd "
-                    "harmonics separate even from odd terms"
-                )
-                out.append(
-                    {
-                        "effects": [best.effect, other.effect],
-                        "gap": gap,
-                        "text": f"the data cannot clearly separate {best.effect} from "
-                        f"{other.effect} (Δ{self.criterion.upper()} {gap:.1f}); {hint}",
-                    }
-                )
-        return out
+        if proposed:
+            return proposed[0]
+        refitted = [c for c in self.candidates if c.fit is not None and not c.problems]
+        return max(refitted, key=lambda c: c.share or 0.0) if refitted else None
+
+    @property
+    def explained_share(self) -> float | None:
+        """Share of the free-form reference's gain the best catalogue candidate captures
+        (None when nothing is missing)."""
+        if not self.significant:
+            return None
+        best = self.best
+        return 0.0 if best is None else best.share
+
+    @property
+    def verdict(self) -> str:
+        """One of :data:`VERDICTS`."""
+        if not self.significant:
+            return "drift" if any(d.significant for d in self.drift) else "nothing missing"
+        proposed = self.missing()
+        if not proposed:
+            return "not explained by the catalogue"
+        return "explained" if proposed[0].status == "explained" else "partly explained"
+
+    @property
+    def unexplained(self) -> bool:
+        """Whether something is missing that the catalogue does not (fully) explain."""
+        return self.verdict in ("partly explained", "not explained by the catalogue")
+
+    @property
+    def verdict_text(self) -> str:
+        verdict, share = self.verdict, self.explained_share
+        if verdict == "nothing missing":
+            return "nothing missing beyond the scatter"
+        if verdict == "drift":
+            return "nothing missing as physics; the branches show drift (see below)"
+        best = self.best
+        if verdict == "explained":
+            return f"explained by {best.effect} ({100 * (share or 1):.0f} % of the free-form gain)"
+        if verdict == "partly explained":
+            captured = f"{100 * share:.0f} %" if share is not None else "all"
+            text = (
+                f"partly explained: {best.effect} captures {captured} of what a free-form "
+                "stiffness and damping gain"
+            )
+            if best.beyond:
+                text += f" and leaves the residual beyond the scatter in {', '.join(best.beyond)}"
+            return text
+        text = "not explained by the catalogue"
+        if best is not None and share is not None:
+            text += f" (the best catalogue effect, {best.effect}, captures {100 * share:.0f} %)"
+        return text + "; the free-form describing functions show the shape of what is missing"
 
     # -------------------------------------------------------------------- add
     def add(self, effect: str, **shape: float) -> Criticism:
         """Criticism of the model with ``effect`` added and everything refitted.
 
         Shape values (``k_t=…``, ``F_s=…``, ``v_s=…``) are start values of the fit.
-        The returned criticism's :attr:`history` continues this one's.
+        The returned criticism's :attr:`history` and rounds continue this one's.
 
         Raises
         ------
@@ -515,71 +1004,207 @@ class Criticism:
             weights=self.weights or None,
             candidates=[c for c in self.candidate_effects if c != effect],
             criterion=self.criterion,
-            threshold=self.threshold,
-            z=self.z,
+            alpha=self.alpha,
+            n_bootstrap=self.n_bootstrap,
+            seed=self.seed,
             history=self.history,
+            rounds=self.rounds,
             action=f"+ {effect}",
             prefitted={f"base:{fit.method}": fit},
         )
 
     # ------------------------------------------------------------------- text
+    @property
+    def caveats(self) -> list[str]:
+        """What the user must know to read the verdict."""
+        out = []
+        covariance = self.metric.covariance
+        if covariance.kind == "within-curve":
+            out.append(
+                "one curve: it is compared with its own within-hold noise (estimated from its "
+                "roughness along the levels); the population scatter is unknown, so a finding "
+                "says this assembly departs from the model, not the population"
+            )
+        unused = [c for c, u in zip(self.data.channels, self.data.used, strict=True) if not u]
+        if unused:
+            out.append(f"channels some curves lack are not compared: {', '.join(unused)}")
+        where = no_solution(self.data.levels_m, mean_prediction(self.data, self.fit.predicted))
+        if where:
+            out.append(f"the model as given has {where}")
+        return out
+
     def summary(self) -> str:
-        """A few lines in words: where the model fails and what it lacks."""
-        lines = [f"model: {self.model.equation()}"]
+        """A few lines in words: the decision, where the model fails, what it lacks."""
+        cal_ = self.calibration
+        obs = self.observed
+        lines = [f"model: {self.base.model.equation()}", f"data: {self._data_words()}"]
+        if self.posterior is None and self.fit.model.equation() != self.base.model.equation():
+            lines.append(f"(coefficients refitted; as given: χ² {self._chi2(self.fit):.4g} → "
+                         f"{self._chi2(self.base):.4g})")  # fmt: skip
         lines.append(
-            f"frequency RMSE {self.fit.frequency_rmse_hz:.3g} Hz, damping RMSE "
-            f"{100 * self.fit.damping_rmse:.3g} %-points"
+            f"frequency RMSE {self.base.frequency_rmse_hz:.3g} Hz, damping RMSE "
+            f"{100 * self.base.damping_rmse:.3g} %-points"
             + (
-                f", harmonics RMSE {100 * self.fit.harmonic_rmse:.3g} % of the fundamental"
-                if self.fit.harmonic_rmse is not None
+                f", harmonics RMSE {100 * self.base.harmonic_rmse:.3g} % of the fundamental"
+                if self.base.harmonic_rmse is not None
                 else ""
             )
         )
+        lines.append(
+            f"decision: catalogue gain Δχ² {obs.catalogue[0]:.4g} (threshold "
+            f"{cal_.catalogue_threshold:.3g}), free-form gain {obs.reference[0]:.4g} (threshold "
+            f"{cal_.reference_threshold:.3g}, {obs.reference_rank} dof); α = {self.alpha:g}, "
+            f"{cal_.n_bootstrap} bootstrap campaigns, p = {self.p_value:.2g}; where-bound "
+            f"{cal_.where_bound:.2f} standard errors"
+        )
+        lines += [f"caveat: {c}" for c in self.caveats]
         failures = self.where()
         lines += [f"fails: {f.text}" for f in failures] or ["fails: nowhere beyond the scatter"]
+        for text in self._no_solution_texts():
+            lines.append(f"fails: {text}")
+        lines.append(f"verdict: {self.verdict_text}")
         proposed = self.missing()
+        lines.append(
+            f"counts: {len(self.candidate_effects)} catalogue effects tried, "
+            f"{sum(c.fit is not None for c in self.candidates)} refitted, {len(proposed)} "
+            f"proposed, {len(self.groups)} ambiguity group{'s' if len(self.groups) != 1 else ''}"
+        )
         if not proposed:
-            lines.append("missing: nothing significant")
+            lines.append("missing: nothing proposed")
         for c in proposed[:3]:
-            reduction = ", ".join(
-                f"{CHANNEL_LABELS[k][0] if k in CHANNEL_LABELS else k} RMSE "
-                f"{CHANNEL_LABELS.get(k, ('', '', 100.0))[2] * before:.2g} → "
-                f"{CHANNEL_LABELS.get(k, ('', '', 100.0))[2] * after:.2g}"
-                for k, before, after in _rmse_pairs(c.base, c.fit)
-            )
-            lines.append(
-                f"missing: {c.effect} (Δ{self.criterion.upper()} {c.delta_ic:.1f}; "
-                f"{reduction}): {c.reading}"
-            )
-        lines += [a["text"] for a in self.ambiguous]
+            lines.append(f"missing: {c.effect} ({c.status}; {self._numbers(c)}): {c.reading}")
+        for c in self.candidates:
+            if c.fit is not None and c.status == "improves the fit but does not explain it":
+                why = "; ".join(c.problems) or (
+                    f"makes {', '.join(c.worse)} worse beyond the noise" if c.worse
+                    else "not significant on its own"
+                )  # fmt: skip
+                lines.append(f"improves the fit but does not explain it: {c.effect} ({why})")
+        lines += [g.text for g in self.groups]
+        lines += [f"drift: {d.text}" for d in self.drift if d.significant]
+        if self.significant:
+            lines.append(f"free-form reference: {self._shape_words()}")
         return "\n".join(lines)
+
+    def _data_words(self) -> str:
+        """What the likelihood used: curves, levels, channels, the covariance's kind."""
+        data, covariance = self.data, self.metric.covariance
+        mm = 1e3 * data.levels_m
+        used = [c for c, u in zip(data.channels, data.used, strict=True) if u]
+        text = (
+            f"{data.n_curves} curve{'s' if data.n_curves != 1 else ''}, {mm.size} levels "
+            f"{mm[0]:.2g}–{mm[-1]:.2g} mm, channels {', '.join(used)}; {covariance.kind} "
+            "covariance"
+        )
+        if covariance.kind == "between-curve":
+            text += f" (correlation shrinkage {covariance.correlation_shrinkage:.2f})"
+        return text
+
+    def _no_solution_texts(self) -> list[str]:
+        where = no_solution(self.data.levels_m, mean_prediction(self.data, self.base.predicted))
+        return [f"the refitted model has {where}"] if where else []
+
+    def _numbers(self, c: Candidate) -> str:
+        reduction = ", ".join(
+            f"{CHANNEL_LABELS[k][0] if k in CHANNEL_LABELS else k} RMSE "
+            f"{CHANNEL_LABELS.get(k, ('', '', 100.0))[2] * before:.2g} → "
+            f"{CHANNEL_LABELS.get(k, ('', '', 100.0))[2] * after:.2g}"
+            for k, before, after in _rmse_pairs(c.base, c.fit)
+        )
+        share = "" if c.share is None else f", {100 * c.share:.0f} % of the free-form gain"
+        return f"Δχ² {c.delta_chi2:.4g}{share}; {reduction}"
+
+    def _shape_words(self) -> str:
+        ref = self.reference
+        k_base, c_base = ref.describing(ref.base_frequency_hz, ref.base_damping_ratio)
+        k_ref, c_ref = ref.describing(ref.frequency_hz, ref.damping_ratio)
+        dk = 100 * (k_ref / k_base - 1)
+        dc = 100 * (c_ref / c_base - 1)
+        mm = 1e3 * ref.levels_m
+        i, j = int(np.nanargmax(np.abs(dk))), int(np.nanargmax(np.abs(dc)))
+        return (
+            f"k_eq departs from the model's by up to {dk[i]:+.2g} % (at {mm[i]:.2g} mm), c_eq by "
+            f"up to {dc[j]:+.2g} % (at {mm[j]:.2g} mm); Δχ² {ref.gain:.4g} with "
+            f"{ref.degrees_of_freedom} degrees of freedom"
+        )
 
     def __repr__(self) -> str:
         return f"<Criticism of {self.model.equation()}>"
 
     # ------------------------------------------------------------------- JSON
+    def round_report(self) -> dict[str, Any]:
+        """This round: the model, the decision, the ranking and the groups."""
+        return {
+            "action": self.history[-1].action,
+            "equation": self.base.model.equation(),
+            "verdict": self.verdict,
+            "verdict_text": self.verdict_text,
+            "significant": self.significant,
+            "threshold": self.threshold,
+            "p_value": self.p_value,
+            "explained_share": self.explained_share,
+            "ranking": [_ranking_entry(c) for c in self.missing()],
+            "groups": [g.to_dict() for g in self.groups],
+            "summary": self.summary(),
+        }
+
+    @property
+    def rounds(self) -> list[dict[str, Any]]:
+        """Every round's report so far, this one last."""
+        return [*self.previous_rounds, self.round_report()]
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready report (see :meth:`write`)."""
         comparison = {
             channel: {k: v.tolist() for k, v in entry.items()}
             for channel, entry in self.comparison.items()
         }
+        covariance = self.metric.covariance
         return {
             "format": FORMAT,
-            "version": 1,
-            "model": self.model.to_dict(),
-            "equation": self.model.equation(),
-            "method": self.fit.method,
+            "version": 2,
+            "model": self.base.model.to_dict(),
+            "equation": self.base.model.equation(),
+            "method": self.base.method,
             "criterion": self.criterion,
-            "threshold": self.threshold,
+            "verdict": self.verdict,
+            "verdict_text": self.verdict_text,
             "significant": self.significant,
-            "frequency_rmse_hz": self.fit.frequency_rmse_hz,
-            "damping_rmse": self.fit.damping_rmse,
-            "harmonic_rmse": self.fit.harmonic_rmse,
+            "unexplained": self.unexplained,
+            "explained_share": self.explained_share,
+            "threshold": self.threshold,
+            "thresholds": self.calibration.to_dict(),
+            "alpha": self.alpha,
+            "n_bootstrap": self.n_bootstrap,
+            "p_value": self.p_value,
+            "statistics": {
+                "catalogue_gain": float(self.observed.catalogue[0]),
+                "reference_gain": float(self.observed.reference[0]),
+                "reference_dof": self.observed.reference_rank,
+                "chi2": float(self.observed.chi2[0]),
+                "fires": self.fires,
+            },
+            "covariance": {
+                "kind": covariance.kind,
+                "n_curves": covariance.n_curves,
+                "correlation_shrinkage": covariance.correlation_shrinkage,
+                "variance_shrinkage": covariance.variance_shrinkage,
+                "noise_floor": dict(self.data.noise_floor),
+                "posterior_widened": self.posterior is not None,
+            },
+            "caveats": self.caveats,
+            "frequency_rmse_hz": self.base.frequency_rmse_hz,
+            "damping_rmse": self.base.damping_rmse,
+            "harmonic_rmse": self.base.harmonic_rmse,
             "fails_at": [f.to_dict() for f in self.where()],
+            "no_solution": self._no_solution_texts(),
             "ranking": [_ranking_entry(c) for c in self.missing()],
-            "candidates": [c.to_dict() for c in self.candidates],
+            "groups": [g.to_dict() for g in self.groups],
             "ambiguous": self.ambiguous,
+            "candidates": [c.to_dict() for c in self.candidates],
+            "drift": [d.to_dict() for d in self.drift],
+            "reference": self.reference.to_dict(),
+            "rounds": self.rounds,
             "history": [s.to_dict() for s in self.history],
             "summary": self.summary(),
             "n_curves": len(self.data.labels),
@@ -599,6 +1224,7 @@ class Criticism:
         Figures (:func:`identification.criticism.plots.write_figures`):
         ``comparison.png`` (measured vs predicted with residual bands),
         ``signatures.png`` (residual with the top candidates' signatures),
+        ``freeform.png`` (the free-form describing functions against the model's),
         ``history.png`` (the error along the loop).
         """
         paths = {"json": atomic_write_text(Path(folder) / "criticism.json", self.to_json())}
@@ -608,6 +1234,10 @@ class Criticism:
 def _ranking_entry(c: Candidate) -> dict[str, Any]:
     return {
         "effect": c.effect,
+        "status": c.status,
+        "explained_share": c.share,
+        "delta_chi2": c.delta_chi2,
+        "gain": c.gain,
         "error_reduction": c.error_reduction,
         "delta_information_criterion": c.delta_ic,
         "reading": c.reading,
@@ -621,6 +1251,8 @@ def _jsonable(value: Any) -> Any:
         return {k: _jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
         return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
     if isinstance(value, np.generic):
         value = value.item()
     if isinstance(value, float) and not np.isfinite(value):
@@ -664,22 +1296,25 @@ def criticize(
     *,
     records: Sequence[Record] | None = None,
     posterior: tuple[Sequence[str], ArrayLike] | None = None,
+    posterior_kind: str = "population",
     candidates: Sequence[str] | None = None,
     history: Sequence[Step | Mapping[str, Any]] = (),
     criterion: str = "bic",
-    threshold: float = DEFAULT_THRESHOLD,
+    alpha: float = ALPHA,
+    n_bootstrap: int = N_BOOTSTRAP,
+    seed: int = 0,
     method: str = "auto",
     weights: Mapping[str, float] | None = None,
     noise_floor: Mapping[str, float] | None = None,
     n_periods: int = 70,
-    z: float = 2.0,
 ) -> Criticism:
-    """Compare a model with measured backbones, locate its failures, rank what it lacks.
+    """Compare a model with measured backbones, decide whether something is missing, rank
+    what the catalogue offers, and say when it does not explain the data.
 
     Parameters
     ----------
     model
-        The model to criticise.
+        The model to criticise; its structure is refitted to the data.
     measured
         Measured backbones. The harmonics they carry (backbones extracted from test
         records keep their 2nd and 3rd harmonics) become a fitted channel (see the
@@ -689,24 +1324,32 @@ def criticize(
         (:func:`identification.measurements.extraction.extract_backbones`).
     posterior
         Posterior draws of the model's parameters, ``(names, (n_draws, n_names))``,
-        names among the model's parameter names (a few hundred draws suffice for a
-        95 % band; ``pm_joint``'s ``criticize`` takes a DataTree from ``pm.sample``):
-        the model is compared at their medians, and they give the
-        posterior-predictive band, its coverage, and widen the significance test.
+        names among the model's parameter names (``pm_joint``'s ``criticize`` takes a
+        DataTree from ``pm.sample``): the model is judged at their medians (not
+        refitted), with the predictive band and its coverage, and the covariance is
+        widened by the uncertainty of the population-mean curve the posterior implies.
+    posterior_kind
+        ``"population"`` (default: the draws spread like the population, as the paper's
+        population matching gives; the mean curve's uncertainty is their spread over the
+        number of curves) or ``"mean"`` (the draws are of the population mean, as a
+        hierarchical model's mean parameters are; their spread is that uncertainty).
     candidates
         Effects to try; default every catalogue effect the model lacks.
     history
         Steps of an earlier criticism (``crit.history``) to continue.
-    criterion, threshold
-        ``"bic"`` or ``"aic"``, and the ΔIC below which an effect is proposed.
+    criterion
+        ``"bic"`` or ``"aic"``: the information criterion *reported* per candidate
+        (decisions are the calibrated tests').
+    alpha
+        Probability that a campaign the model explains gets a finding (default 0.01).
+    n_bootstrap, seed
+        Bootstrap campaigns of the calibration (≥ 10/alpha) and their seed.
     method
         Harmonic balance: ``"auto"``, ``"single"`` or ``"multi"``.
     weights, noise_floor
         See :func:`identification.fitting.least_squares.fit_backbones`.
     n_periods
         Periods per hold used for the backbone points of ``records``.
-    z
-        Standard errors a mean residual must exceed to be significant.
 
     Raises
     ------
@@ -736,7 +1379,8 @@ def criticize(
     steps = [s if isinstance(s, Step) else Step.from_dict(s) for s in history]
     return Criticism(
         model, data, method=method, weights=weights, candidates=candidates, criterion=criterion,
-        threshold=threshold, z=z, posterior=draws, history=steps,
+        alpha=alpha, n_bootstrap=n_bootstrap, seed=seed, posterior=draws,
+        posterior_kind=posterior_kind, history=steps,
     )  # fmt: skip
 
 

@@ -1,7 +1,8 @@
-"""Figures of a criticism: measured against predicted, signatures, the loop's history.
+"""Figures of a criticism: measured against predicted, signatures, the free-form
+describing functions, the loop's history.
 
 Each function draws on matplotlib axes it is given (no pyplot, no global
-backend state); :func:`write_figures` draws all three on
+backend state); :func:`write_figures` draws all four on
 :class:`matplotlib.figure.Figure` objects and writes them as PNG atomically.
 ``crit`` is a :class:`identification.criticism.criticism.Criticism` (typed
 ``Any`` here: :meth:`~identification.criticism.criticism.Criticism.write` draws
@@ -22,7 +23,7 @@ from identification.criticism.readings import CHANNEL_LABELS
 from identification.fitting.data import HARMONIC_ORDERS
 from identification.fitting.prediction import predict_channels
 
-__all__ = ["plot_comparison", "plot_history", "plot_signatures", "write_figures"]
+__all__ = ["plot_comparison", "plot_freeform", "plot_history", "plot_signatures", "write_figures"]
 
 
 def _panels(crit: Any, residual: np.ndarray, n_axes: int) -> list[tuple[str, str]]:
@@ -46,17 +47,21 @@ def plot_comparison(crit: Any, axes) -> Any:
     """Measured vs predicted backbones (top) and the mean residual with its bands (bottom).
 
     ``axes``: 2 rows × 2 columns (frequency, damping), or × 3 with measured harmonics
-    (the harmonic the model misses most, cosine part). The grey band is ±z
-    standard errors of the mean from the scatter across curves (widened by the
-    posterior spread); with a posterior the predictive 95 % band is drawn too;
-    failure ranges are shaded.
+    (the harmonic the model misses most, cosine part). The model is the refitted
+    one (the posterior median with a posterior). The grey band is ± the calibrated
+    ``where`` bound in standard errors of the mean curve (between-curve scatter over
+    the number of curves ⊕ floors, widened by a posterior's population-mean
+    uncertainty); with a posterior the predictive 95 % band is drawn too; failure
+    ranges are shaded.
     """
     axes = np.asarray(axes).reshape(2, -1)
     data = crit.data
     levels_mm = 1e3 * data.levels_m
     grid = np.geomspace(data.amplitude_m.min(), data.amplitude_m.max(), 80)
-    curve = predict_channels(crit.model, grid, data.channels, method=crit.fit.method)
-    mean_residual, _ = crit.fit.level_residual()
+    model = crit.base.model
+    curve = predict_channels(model, grid, data.channels, method=crit.base.method)
+    mean_residual = data.mean_residual(crit.base.predicted)
+    bound = crit.calibration.where_bound
     failures = crit.where()
     for column, (label, channel) in enumerate(_panels(crit, mean_residual, axes.shape[1])):
         _, unit, factor = CHANNEL_LABELS[label]
@@ -73,8 +78,8 @@ def plot_comparison(crit: Any, axes) -> Any:
                              color="C0", alpha=0.2, label="posterior 95 %")  # fmt: skip
         top.set(xscale="log", ylabel=f"{_title(label)} ({'%' if factor == 100 else unit})")
         residual, se = crit.residual(channel)
-        bottom.fill_between(levels_mm, -crit.z * factor * se, crit.z * factor * se, color="0.85",
-                            label=f"±{crit.z:g} SE (scatter)")  # fmt: skip
+        bottom.fill_between(levels_mm, -bound * factor * se, bound * factor * se, color="0.85",
+                            label=f"±{bound:.2g} SE (calibrated bound)")  # fmt: skip
         bottom.plot(levels_mm, factor * residual, "o-", color="C3", label="mean residual")
         bottom.axhline(0.0, color="k", lw=0.8)
         for failure in failures:
@@ -84,7 +89,7 @@ def plot_comparison(crit: Any, axes) -> Any:
                    ylabel=f"measured − model ({unit})")  # fmt: skip
         bottom.legend(fontsize="small")
     axes[0, 0].legend(fontsize="small")
-    axes[0, 0].set_title(crit.model.equation(3), fontsize="small", loc="left")
+    axes[0, 0].set_title(model.equation(3), fontsize="small", loc="left")
     return axes
 
 
@@ -99,22 +104,56 @@ def plot_signatures(crit: Any, axes, top: int = 3) -> Any:
     axes = np.atleast_1d(np.asarray(axes)).ravel()
     data = crit.data
     levels_mm = 1e3 * data.levels_m
-    shown = crit.missing()[:top] or crit.candidates[:top]
-    base = shown[0].base if shown else crit.fit
-    residual, se = base.level_residual()
+    shown = [c for c in crit.candidates if c.fit is not None][:top]
+    base = shown[0].base if shown else crit.base
+    residual = data.mean_residual(base.predicted)
+    se = np.column_stack([crit.residual(c)[1] for c in data.channels])
+    bound = crit.calibration.where_bound
     for ax, (label, channel) in zip(axes, _panels(crit, residual, len(axes)), strict=False):
         _, unit, factor = CHANNEL_LABELS[label]
         j = data.column(channel)
-        ax.fill_between(levels_mm, -crit.z * factor * se[:, j], crit.z * factor * se[:, j],
+        ax.fill_between(levels_mm, -bound * factor * se[:, j], bound * factor * se[:, j],
                         color="0.85")  # fmt: skip
         ax.plot(levels_mm, factor * residual[:, j], "ko-", lw=2, label="residual (refitted model)")
         for k, candidate in enumerate(shown):
-            legend = f"{candidate.effect} (Δ{crit.criterion.upper()} {candidate.delta_ic:.0f})"
+            legend = f"{candidate.effect} (Δχ² {candidate.delta_chi2:.0f}, {candidate.status})"
             ax.plot(levels_mm, factor * candidate.signature[channel], "--", color=f"C{k}",
                     label=legend)  # fmt: skip
         ax.axhline(0.0, color="k", lw=0.8)
         ax.set(xscale="log", xlabel="amplitude (mm)", ylabel=unit, title=_title(label))
     axes[0].legend(fontsize="small")
+    return axes
+
+
+def plot_freeform(crit: Any, axes) -> Any:
+    """The free-form describing functions beside the model's: ``k_eq(a)`` and ``c_eq(a)``.
+
+    ``axes``: two axes. The refitted model's equivalent stiffness ``ω(a)²`` and damping
+    ``2ζ(a)ω(a)`` (mass-normalised, at phase resonance), the free-form reference's
+    (what any smooth physics fitted to the same data gives: the shape of what is
+    missing), and the best catalogue candidate's where one was refitted.
+    """
+    ref = crit.reference
+    mm = 1e3 * ref.levels_m
+    k_base, c_base = ref.describing(ref.base_frequency_hz, ref.base_damping_ratio)
+    k_ref, c_ref = ref.describing(ref.frequency_hz, ref.damping_ratio)
+    curves = [("model", k_base, c_base, "k-"), ("free-form reference", k_ref, c_ref, "C3o-")]
+    best = crit.best
+    if best is not None and best.fit is not None:
+        table = best.signature
+        f = ref.base_frequency_hz + table["frequency_hz"]
+        z = ref.base_damping_ratio + table["damping_ratio"]
+        k_best, c_best = ref.describing(f, z)
+        curves.append((f"+ {best.effect} ({best.status})", k_best, c_best, "C0--"))
+    ax_k, ax_c = np.asarray(axes).ravel()[:2]
+    for label, k, c, style in curves:
+        ax_k.plot(mm, k / k_base[0], style, label=label)
+        ax_c.plot(mm, c, style, label=label)
+    ax_k.set(xscale="log", xlabel="amplitude (mm)", ylabel="k_eq / k_eq(smallest level)",
+             title="equivalent stiffness ω²")  # fmt: skip
+    ax_c.set(xscale="log", xlabel="amplitude (mm)", ylabel="c_eq (1/s)",
+             title="equivalent damping 2ζω")  # fmt: skip
+    ax_k.legend(fontsize="small")
     return axes
 
 
@@ -137,10 +176,11 @@ def plot_history(history: Sequence[Any], ax) -> Any:
 
 
 def write_figures(crit: Any, folder: str | Path) -> dict[str, Path]:
-    """Draw the three figures of a criticism and write them as PNG into ``folder``.
+    """Draw the four figures of a criticism and write them as PNG into ``folder``.
 
     ``comparison.png`` (:func:`plot_comparison`), ``signatures.png``
-    (:func:`plot_signatures`) and ``history.png`` (:func:`plot_history`).
+    (:func:`plot_signatures`), ``freeform.png`` (:func:`plot_freeform`) and
+    ``history.png`` (:func:`plot_history`).
     """
     from matplotlib.figure import Figure  # no pyplot: no global backend state
 
@@ -151,6 +191,7 @@ def write_figures(crit: Any, folder: str | Path) -> dict[str, Path]:
                        plot_comparison),
         "signatures": (Figure(figsize=(5.5 * columns, 4), layout="constrained"), (1, columns),
                        plot_signatures),
+        "freeform": (Figure(figsize=(11, 4), layout="constrained"), (1, 2), plot_freeform),
     }  # fmt: skip
     paths = {}
     for name, (figure, grid, plot) in figures.items():

@@ -1,14 +1,17 @@
 """The words of the criticism: physical readings of fitted candidates.
 
 A reading says what the fitted effect itself does in this test (its own change
-of frequency, damping and harmonics, when above the scatter), then the
-catalogue's physical reading (:attr:`identification.effects.Effect.reading`),
-then the fitted numbers a structural dynamicist reads directly.
+of frequency, damping and harmonics, when above the scatter), the fitted term
+with its sign and size, and then — only for an admissible fit — that this is
+*consistent with* the catalogue's physical reading
+(:attr:`identification.effects.Effect.reading`) and what the fitted numbers say.
+An inadmissible fit (negative friction, cancelling terms) gets no physical story,
+only what makes it inadmissible.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -26,8 +29,15 @@ CHANNEL_LABELS = {
 }
 
 
-def _reading(effect: str, model: JointModel, own: Mapping[str, np.ndarray], data: FitData) -> str:
-    """The catalogue reading, prefixed by what the fitted effect itself does in this test.
+def _reading(
+    effect: str,
+    model: JointModel,
+    own: Mapping[str, np.ndarray],
+    data: FitData,
+    problems: Sequence[str] = (),
+) -> str:
+    """What the fitted effect does in this test, its fitted term, and the catalogue reading
+    it is consistent with (none when ``problems`` make the fit inadmissible).
 
     ``own`` is the effect's contribution per channel at the levels (the refitted
     model with and without it); changes below twice the standard error of the
@@ -49,7 +59,7 @@ def _reading(effect: str, model: JointModel, own: Mapping[str, np.ndarray], data
             f"damping {_trend(d)}, {what} up to {100 * abs(d[i]):.2g} %-points at "
             f"{levels_mm[i]:.2g} mm"
         )
-    if data.has_harmonics:
+    if data.has_harmonics and all(f"harmonic{o}_cos" in own for o in HARMONIC_ORDERS):
         for order in HARMONIC_ORDERS:
             q = np.hypot(own[f"harmonic{order}_cos"], own[f"harmonic{order}_sin"])
             i = int(np.argmax(q))
@@ -62,7 +72,14 @@ def _reading(effect: str, model: JointModel, own: Mapping[str, np.ndarray], data
     evidence = (" while ".join(phrases[:2]) + "".join(f", {p}" for p in phrases[2:])) or (
         "a change below the scatter"
     )
-    return f"{evidence}: {CATALOGUE[effect].reading}{_specifics(effect, model, data)}"
+    term = next(t for t in model.terms if t.effect == effect)
+    fitted = f"fitted {'−' if term.coefficient < 0 else '+'}{term.text(3)}"
+    if problems:
+        return f"{evidence} ({fitted}); not admissible as physics: {'; '.join(problems)}"
+    return (
+        f"{evidence} ({fitted}); consistent with {CATALOGUE[effect].reading}"
+        f"{_specifics(effect, model, data)}"
+    )
 
 
 def _trend(values: np.ndarray) -> str:

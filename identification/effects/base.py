@@ -214,6 +214,9 @@ class Effect:
         The force depends on the loading history (``microslip``): its feature
         needs the whole path (:attr:`path_feature`), and the dispatcher
         :func:`force_dispatcher` gives 0 for it (the integrators carry its state).
+    coefficient_sign
+        +1 where only a positive coefficient is physical (a friction or slip force
+        opposes the motion), 0 where either sign is.
     path_feature
         Hysteretic effects only: ``(x, v, **shape) -> φ`` along a whole path
         starting unstressed (see :meth:`feature`).
@@ -245,6 +248,7 @@ class Effect:
     stiffness_per_omega_squared: Callable[..., Any] | None = field(default=None, repr=False)
     damping: Callable[..., Any] | None = field(default=None, repr=False)
     hysteretic: bool = False
+    coefficient_sign: int = 0
     path_feature: Callable[..., np.ndarray] | None = field(default=None, repr=False)
     shape_grid: Callable[[FitScale], dict[str, np.ndarray]] = field(
         default=_no_shape_grid, repr=False

@@ -39,4 +39,5 @@ EFFECT = Effect(
     shape_parameters=(ShapeParameter("v_reg", DEFAULT_SIGN_VELOCITY, "m/s"),),
     damping=_damping,
     fitted_reading=_fitted_reading,
+    coefficient_sign=1,
 )

@@ -129,4 +129,5 @@ EFFECT = Effect(
     shape_grid=_shape_grid,
     shape_bounds=_shape_bounds,
     fitted_reading=_fitted_reading,
+    coefficient_sign=1,
 )

@@ -1,4 +1,4 @@
-"""Measured backbones in fitting form: channels, amplitude levels, standard deviations.
+"""Measured backbones in fitting form: channels, curves at levels, and one likelihood.
 
 A model is compared with measured backbones in **channels**: the frequency and
 the power-balance damping ratio of every point (:data:`BACKBONE_CHANNELS`), and,
@@ -8,29 +8,45 @@ harmonics of the response as a third kind (:data:`HARMONIC_CHANNELS`): even
 terms such as ``x²`` leave a second harmonic, ``x³`` a third, where the
 backbone alone cannot tell them apart.
 
-Each value's standard deviation combines the measured scatter across curves at
-its amplitude (assembly-to-assembly variability), a stated noise floor
-(:data:`NOISE_FLOOR`) and, for the harmonics, the hold fit's standard error, so
-a population-mean model is judged against the spread the test itself shows.
+**The likelihood.** Each curve is interpolated to common amplitude levels
+(:func:`measurement_levels`; linear in log-amplitude, each branch of a test that
+steps up and down on its own, the branches then averaged, which cancels a drift
+linear in time). A population-mean model meets the *mean* curve, and the points
+of one curve share that assembly's offsets, so the residual of the mean curve,
+``r = mean_c(Y_c − μ_c)`` (``L`` levels × ``C`` channels), is Gaussian with the
+covariance ``V = Σ/n + diag(floor²)`` of :mod:`identification.fitting.covariance`:
+``Σ`` the between-curve covariance estimated from the curves themselves (shrunk,
+heteroscedastic, floored by the hold fits' standard errors), ``floor`` the stated
+systematic floors (:data:`NOISE_FLOOR`). ``Σ`` does not depend on the model, so
+every model is judged in the same metric: fits minimise ``rᵀV⁻¹r``
+(:meth:`FitData.whitened`), and the criticism's tests use the same quantity.
+
+Each point also keeps the harmonics of the base acceleration its hold measured,
+the forcing the model's prediction at that point is driven by
+(:func:`identification.fitting.prediction.predict_channels`).
 """
 
 from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
-from identification.measurements.backbone import BackboneSet
+from identification.fitting import covariance as cov
+from identification.measurements.backbone import Backbone, BackboneSet
 
 __all__ = [
     "BACKBONE_CHANNELS",
+    "FAILED_RESIDUAL",
     "HARMONIC_CHANNELS",
     "HARMONIC_ORDERS",
     "NOISE_FLOOR",
     "FitData",
+    "Metric",
     "fit_data",
     "measurement_levels",
 ]
@@ -41,10 +57,14 @@ BACKBONE_CHANNELS = ("frequency_hz", "damping_ratio")
 #: displacement ``x = a cos θ + Σ_h C_h cos hθ + S_h sin hθ`` (fractions of the fundamental).
 HARMONIC_ORDERS = (2, 3)
 HARMONIC_CHANNELS = tuple(f"harmonic{h}_{part}" for h in HARMONIC_ORDERS for part in ("cos", "sin"))
-#: Noise floors combined with the measured scatter: frequency (Hz), damping ratio (1),
-#: harmonics (fraction of the fundamental). The harmonics floor stands for what a real
-#: rig adds (shaker distortion, sensor nonlinearity) beyond the fit's standard error.
+#: Systematic floors of the mean curve: frequency (Hz), damping ratio (1), harmonics
+#: (fraction of the fundamental). They stand for what the measurement chain adds that
+#: does not average out over curves (a phase offset of the lock shifts the frequency by
+#: about f·ζ·tan φ: 0.016 Hz at 101 Hz, 0.3 % damping and 3°; sensor nonlinearity and
+#: shaker distortion leak into the harmonics).
 NOISE_FLOOR = {"frequency_hz": 0.02, "damping_ratio": 2e-5, "harmonics": 1e-3}
+#: Whitened residual given to an entry where the model has no backbone (no periodic solution).
+FAILED_RESIDUAL = 1e3
 
 
 def _floor_key(channel: str) -> str:
@@ -52,15 +72,37 @@ def _floor_key(channel: str) -> str:
 
 
 # --------------------------------------------------------------------------
-# Measured data in fitting form
+# Branches and levels
+
+
+def branches(amplitude_m: np.ndarray) -> list[np.ndarray]:
+    """Indices of the monotone runs of a curve's points in test order.
+
+    A test stepped up then down has two branches sharing the turning point; a
+    test stepped one way has one. Repeated amplitudes stay in the run they are in.
+    """
+    a = np.asarray(amplitude_m, dtype=float)
+    if a.size < 3:
+        return [np.arange(a.size)]
+    direction = np.sign(np.diff(a))
+    runs, start, current = [], 0, 0.0
+    for i, d in enumerate(direction):
+        if d == 0 or d == current or current == 0:
+            current = current or d
+            continue
+        runs.append(np.arange(start, i + 1))  # the turning point ends this run …
+        start, current = i, d  # … and starts the next
+    runs.append(np.arange(start, a.size))
+    return runs
 
 
 def measurement_levels(measured: BackboneSet) -> np.ndarray:
     """Amplitude levels (m) where measured and predicted backbones are compared.
 
     Quantiles of the measured amplitudes inside the range every curve shares, as
-    many as a curve has points there: the levels follow the test's own spacing
-    (geometric steps put many levels at small amplitudes, where friction acts).
+    many as a curve's longest branch has points there: the levels follow the
+    test's own spacing (geometric steps put many levels at small amplitudes,
+    where friction acts), and a test stepped up and down counts its levels once.
 
     Raises
     ------
@@ -71,23 +113,88 @@ def measurement_levels(measured: BackboneSet) -> np.ndarray:
     counts, pooled = [], []
     for curve in measured:
         a = curve.amplitude_m
-        inside = a[(a >= low * (1 - 1e-12)) & (a <= high * (1 + 1e-12))]
-        if np.unique(inside).size < 3:
+        inside = (a >= low * (1 - 1e-12)) & (a <= high * (1 + 1e-12))
+        if np.unique(a[inside]).size < 3:
             raise ValueError(
-                f"curve {curve.label!r} has {np.unique(inside).size} backbone point(s) in the "
+                f"curve {curve.label!r} has {np.unique(a[inside]).size} backbone point(s) in the "
                 f"range all curves share ({1e3 * low:.4g}–{1e3 * high:.4g} mm); at least 3 are "
                 "needed to compare model and measurement"
             )
-        counts.append(np.unique(inside).size)
-        pooled.append(inside)
+        counts.append(max(np.unique(a[run][inside[run]]).size for run in branches(a)))
+        pooled.append(a[inside])
     n = int(np.clip(np.median(counts), 3, 41))
     levels = np.quantile(np.concatenate(pooled), np.linspace(0.0, 1.0, n))
     return np.unique(np.clip(levels, low, high))
 
 
-@dataclass(frozen=True)
+def _branch_values(
+    runs: Sequence[Sequence[np.ndarray]],
+    amplitude: np.ndarray,
+    levels: np.ndarray,
+    per_point: np.ndarray,
+) -> np.ndarray:
+    """``(n_curves, n_branches, n_levels, n_columns)`` each branch interpolated to the levels.
+
+    Linear in log-amplitude inside the branch's range, points at equal amplitude
+    averaged; NaN where a branch does not reach a level or lacks the column, and at
+    levels next to a NaN point (a model without a periodic solution there) only.
+    """
+    n_branches = max(len(r) for r in runs)
+    out = np.full((len(runs), n_branches, levels.size, per_point.shape[1]), np.nan)
+    log_levels = np.log(levels)
+    for i, curve_runs in enumerate(runs):
+        for b, rows in enumerate(curve_runs):
+            unique, inverse = np.unique(amplitude[rows], return_inverse=True)
+            if unique.size < 2:
+                continue
+            counts = np.bincount(inverse)
+            inside = (levels >= unique[0] * (1 - 1e-12)) & (levels <= unique[-1] * (1 + 1e-12))
+            for j in range(per_point.shape[1]):
+                column = per_point[rows, j]
+                mean = np.bincount(inverse, weights=column) / counts
+                out[i, b, inside, j] = np.interp(log_levels[inside], np.log(unique), mean)
+    return out
+
+
+# --------------------------------------------------------------------------
+# The metric of one set of channel weights
+
+
+@dataclass(frozen=True, eq=False)
+class Metric:
+    """The likelihood's metric for given channel weights.
+
+    ``keep`` selects the entries of the level table (``(n_levels, n_channels)``,
+    flattened level-major) that count: used channels with a non-zero weight;
+    ``weights`` multiplies each kept residual entry; ``covariance`` is the
+    :class:`~identification.fitting.covariance.LevelCovariance` of the kept entries.
+    """
+
+    keep: np.ndarray
+    weights: np.ndarray
+    covariance: cov.LevelCovariance
+
+    @property
+    def size(self) -> int:
+        return int(self.keep.sum())
+
+    def whiten(self, level_residual: np.ndarray) -> np.ndarray:
+        """Whitened weighted residual of an ``(n_levels, n_channels)`` table (or a stack of
+        them, ``(..., n_levels, n_channels)``); entries where the model failed (NaN) get
+        :data:`FAILED_RESIDUAL` standard errors."""
+        flat = level_residual.reshape(*level_residual.shape[:-2], -1)[..., self.keep]
+        se = self.covariance.standard_error
+        flat = np.where(np.isfinite(flat), flat, FAILED_RESIDUAL * se)
+        return self.covariance.whiten((self.weights * flat).T).T
+
+
+# --------------------------------------------------------------------------
+# Measured data in fitting form
+
+
+@dataclass(frozen=True, eq=False)
 class FitData:
-    """Measured points of several curves, with the standard deviation of each value.
+    """Measured points of several curves, their levels and the likelihood's covariance.
 
     Attributes
     ----------
@@ -101,18 +208,25 @@ class FitData:
         Channel names (:data:`BACKBONE_CHANNELS`, then :data:`HARMONIC_CHANNELS` with harmonics).
     values
         ``(n_points, n_channels)`` measured values; NaN where a curve lacks a channel.
-    sigma
-        ``(n_points, n_channels)`` standard deviation: scatter across curves at that
-        amplitude combined with the noise floor (and, for harmonics, the fit's error).
-    levels_m
-        Amplitude levels of the comparison (:func:`measurement_levels`).
-    level_sigma
-        ``(n_levels, n_channels)`` scatter across curves ⊕ noise floor at the levels.
     standard_error
         ``(n_points, n_channels)`` standard error of each measured value where known
         (the harmonics' from their hold fits), else 0.
+    levels_m
+        Amplitude levels of the comparison (:func:`measurement_levels`).
+    runs
+        Per curve, the point indices (into the arrays above) of each branch, in test order.
+    time
+        ``(n_points,)`` when each point was held: seconds from the record's start where
+        the backbones carry hold times, else the point's position in its record.
+    time_unit
+        ``"s"`` or ``"hold"``.
     noise_floor
-        The noise floors used (:data:`NOISE_FLOOR` keys).
+        The systematic floors used (:data:`NOISE_FLOOR` keys).
+    excitation_harmonics
+        ``(n_points, n_orders)`` harmonics ``2, 3, …`` of each point's measured base
+        acceleration (fractions of its fundamental, in its own frame): the forcing
+        its prediction is driven by (0 for curves that do not carry them); None
+        where no curve does.
     """
 
     labels: tuple[str, ...]
@@ -120,16 +234,23 @@ class FitData:
     amplitude_m: np.ndarray
     channels: tuple[str, ...]
     values: np.ndarray
-    sigma: np.ndarray
-    levels_m: np.ndarray
-    level_sigma: np.ndarray
-
     standard_error: np.ndarray
+    levels_m: np.ndarray
+    runs: tuple[tuple[np.ndarray, ...], ...]
+    time: np.ndarray
+    time_unit: str
     noise_floor: Mapping[str, float]
+    excitation_harmonics: np.ndarray | None = None
+    _metrics: dict = field(default_factory=dict, repr=False)
 
+    # ------------------------------------------------------------ layout
     @property
     def n_points(self) -> int:
         return self.amplitude_m.size
+
+    @property
+    def n_curves(self) -> int:
+        return len(self.labels)
 
     @property
     def has_harmonics(self) -> bool:
@@ -138,58 +259,154 @@ class FitData:
     def column(self, channel: str) -> int:
         return self.channels.index(channel)
 
+    # ------------------------------------------------------------ curves at levels
+    def branch_values(self, per_point: np.ndarray) -> np.ndarray:
+        """``(n_curves, n_branches, n_levels, n_channels)``: each branch at the levels."""
+        return _branch_values(self.runs, self.amplitude_m, self.levels_m, per_point)
+
     def at_levels(self, per_point: np.ndarray) -> np.ndarray:
-        """``(n_curves, n_levels, n_channels)`` per-point values interpolated to the levels."""
-        return _at_levels(len(self.labels), self.curve, self.amplitude_m, self.levels_m, per_point)
+        """``(n_curves, n_levels, n_channels)`` per-point values at the levels, the branches
+        of a curve averaged (NaN where no branch reaches a level or the channel is absent)."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # levels no branch reaches
+            return np.nanmean(self.branch_values(per_point), axis=1)
+
+    @cached_property
+    def curves_at_levels(self) -> np.ndarray:
+        """The measured curves at the levels (:meth:`at_levels` of :attr:`values`)."""
+        return self.at_levels(self.values)
+
+    @cached_property
+    def used(self) -> np.ndarray:
+        """``(n_channels,)`` whether a channel enters the likelihood: every curve has it at
+        every level (a channel some curves lack is compared nowhere, and said so)."""
+        return np.isfinite(self.curves_at_levels).all(axis=(0, 1))
+
+    def mean_residual(self, predicted: np.ndarray) -> np.ndarray:
+        """``(n_levels, n_channels)`` mean over curves of measured − predicted at the levels
+        (NaN in unused channels and where the model has no solution)."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return np.nanmean(self.at_levels(self.values - predicted), axis=0) * np.where(
+                self.used, 1.0, np.nan
+            )
+
+    # ------------------------------------------------------------ the covariance
+    def estimate_covariance(self, channels: np.ndarray) -> cov.LevelCovariance:
+        """Covariance of the mean residual over ``channels`` (a boolean mask of used
+        channels; entries level-major), estimated from the curves as
+        :func:`identification.fitting.covariance.estimate` does for a simulated campaign."""
+        curves = self.curves_at_levels[:, :, channels]
+        n, levels, n_channels = curves.shape
+        errors = self.at_levels(self.standard_error**2)[:, :, channels]
+        variance_floor = np.nanmean(errors, axis=0).reshape(-1)
+        per_curve, lam_r, lam_v = cov.estimate(
+            curves.reshape(1, n, -1),
+            np.tile(np.arange(n_channels), levels),
+            np.log(self.levels_m),
+            variance_floor,
+        )
+        floors = np.array([self.noise_floor[_floor_key(c)] for c in self.channels])[channels]
+        return cov.LevelCovariance(
+            per_curve[0],
+            np.tile(floors**2, levels),
+            n,
+            float(lam_r[0]),
+            float(lam_v[0]),
+            "between-curve" if n > 1 else "within-curve",
+        )
+
+    @property
+    def covariance(self) -> cov.LevelCovariance:
+        """Covariance of the mean residual over every used channel (:meth:`metric`'s)."""
+        return self.metric().covariance
+
+    @cached_property
+    def level_sigma(self) -> np.ndarray:
+        """``(n_levels, n_channels)`` scatter of one curve (√ of the covariance's diagonal;
+        NaN in unused channels)."""
+        return self._unflatten(np.sqrt(np.diag(self.covariance.per_curve)))
+
+    @cached_property
+    def sigma(self) -> np.ndarray:
+        """``(n_points, n_channels)`` a standard deviation per point (one curve's scatter at
+        its amplitude ⊕ floor ⊕ the point's standard error): the diagonal weights of the
+        linearised start values, not the likelihood."""
+        log_a = np.log(self.amplitude_m)
+        out = np.zeros_like(self.values)
+        for j, channel in enumerate(self.channels):
+            scatter = self.level_sigma[:, j]
+            level = (
+                np.interp(log_a, np.log(self.levels_m), scatter) if self.used[j] else 0.0 * log_a
+            )
+            out[:, j] = np.sqrt(
+                level**2
+                + self.noise_floor[_floor_key(channel)] ** 2
+                + self.standard_error[:, j] ** 2
+            )
+        return out
+
+    def _unflatten(self, entries: np.ndarray) -> np.ndarray:
+        table = np.full((self.levels_m.size, len(self.channels)), np.nan)
+        table[:, self.used] = entries.reshape(self.levels_m.size, -1)
+        return table
+
+    def metric(self, weights: Sequence[float] | None = None) -> Metric:
+        """The likelihood's :class:`Metric` for channel weights (default all 1)."""
+        w = np.ones(len(self.channels)) if weights is None else np.asarray(weights, float)
+        key = tuple(w)
+        if key not in self._metrics:
+            channels = self.used & (w > 0)
+            on = np.broadcast_to(channels, (self.levels_m.size, len(self.channels))).reshape(-1)
+            self._metrics[key] = Metric(
+                on,
+                np.broadcast_to(w, (self.levels_m.size, w.size)).reshape(-1)[on],
+                self.estimate_covariance(channels),
+            )
+        return self._metrics[key]
 
     def level_mean(self, per_point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Mean over curves at the levels ``(n_levels, n_channels)`` and its standard error."""
-        values = self.at_levels(per_point)
-        count = np.sum(np.isfinite(values), axis=0)
+        """Mean over curves at the levels ``(n_levels, n_channels)`` and its standard error
+        under the likelihood's covariance (NaN in unused channels)."""
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # channels no curve has
-            mean = np.nanmean(values, axis=0)
-        return mean, self.level_sigma / np.sqrt(np.maximum(count, 1))
+            mean = np.nanmean(self.at_levels(per_point), axis=0)
+        return mean, self._unflatten(self.covariance.standard_error)
+
+    def whitened(self, predicted: np.ndarray, weights: Sequence[float] | None = None) -> np.ndarray:
+        """Whitened mean residual of a prediction at the points: its sum of squares is the
+        ``χ²`` of the likelihood."""
+        return self.metric(weights).whiten(self.mean_residual(predicted))
+
+    def loglik(self, predicted: np.ndarray, weights: Sequence[float] | None = None) -> float:
+        """Gaussian log-likelihood of the mean residual (−inf where the model has no solution)."""
+        metric = self.metric(weights)
+        residual = self.mean_residual(predicted).reshape(-1)[metric.keep]
+        if not np.isfinite(residual).all():
+            return -np.inf
+        z = metric.covariance.whiten(metric.weights * residual)
+        log_det = 2 * np.sum(np.log(np.diag(metric.covariance.cholesky)))
+        return float(-0.5 * (z @ z + log_det + z.size * np.log(2 * np.pi)))
 
     def subset(self, index: int) -> FitData:
-        """The data of curve ``index`` alone (its standard deviations from the noise floor)."""
-        rows = self.curve == index
-        return _assemble(
+        """The data of curve ``index`` alone (its covariance from its own roughness)."""
+        rows = np.flatnonzero(self.curve == index)
+        position = {g: k for k, g in enumerate(rows)}
+        runs = tuple(np.array([position[g] for g in run]) for run in self.runs[index])
+        return FitData(
             (self.labels[index],),
-            np.zeros(rows.sum(), dtype=int),
+            np.zeros(rows.size, dtype=int),
             self.amplitude_m[rows],
             self.channels,
             self.values[rows],
             self.standard_error[rows],
             self.levels_m,
+            (runs,),
+            self.time[rows],
+            self.time_unit,
             self.noise_floor,
+            None if self.excitation_harmonics is None else self.excitation_harmonics[rows],
         )
-
-
-def _at_levels(
-    n_curves: int, curve: np.ndarray, amplitude: np.ndarray, levels: np.ndarray, per_point
-) -> np.ndarray:
-    """Per-point values of each curve interpolated to the levels, linear in log-amplitude.
-
-    Points at equal amplitude are averaged; NaN where a curve lacks the channel or
-    does not reach a level.
-    """
-    out = np.full((n_curves, levels.size, per_point.shape[1]), np.nan)
-    log_levels = np.log(levels)
-    for i in range(n_curves):
-        rows = curve == i
-        unique, inverse = np.unique(amplitude[rows], return_inverse=True)
-        if unique.size < 2:
-            continue
-        counts = np.bincount(inverse)
-        inside = (levels >= unique[0] * (1 - 1e-12)) & (levels <= unique[-1] * (1 + 1e-12))
-        for j in range(per_point.shape[1]):
-            column = per_point[rows, j]
-            if not np.isfinite(column).all():
-                continue
-            mean = np.bincount(inverse, weights=column) / counts
-            out[i, inside, j] = np.interp(log_levels[inside], np.log(unique), mean)
-    return out
 
 
 def fit_data(measured: BackboneSet, noise_floor: Mapping[str, float] | None = None) -> FitData:
@@ -201,7 +418,8 @@ def fit_data(measured: BackboneSet, noise_floor: Mapping[str, float] | None = No
         The measured backbones. When some carry harmonics
         (:attr:`~identification.measurements.backbone.Backbone.harmonics`), the
         orders :data:`HARMONIC_ORDERS` become channels, NaN for curves (or orders)
-        without them.
+        without them. Hold times (a ``time_s`` per point) are used where every curve
+        has them, else each point's position in its record stands for its time.
     noise_floor
         Overrides of :data:`NOISE_FLOOR` (keys ``frequency_hz``, ``damping_ratio``,
         ``harmonics``).
@@ -217,7 +435,12 @@ def fit_data(measured: BackboneSet, noise_floor: Mapping[str, float] | None = No
         floor[key] = float(value)
     with_harmonics = any(b.harmonics is not None for b in measured)
     channels = BACKBONE_CHANNELS + (HARMONIC_CHANNELS if with_harmonics else ())
-    curve, amplitude, values, errors = [], [], [], []
+    timed = all(getattr(b, "time_s", None) is not None for b in measured)
+    curve, amplitude, values, errors, times, runs = [], [], [], [], [], []
+    offset = 0
+    excitation = None
+    if any(b.excitation_harmonics is not None for b in measured):
+        excitation = np.vstack([_excitation_block(b) for b in measured])
     for i, b in enumerate(measured):
         block = np.full((len(b), len(channels)), np.nan)
         se = np.zeros_like(block)
@@ -234,9 +457,12 @@ def fit_data(measured: BackboneSet, noise_floor: Mapping[str, float] | None = No
         amplitude.append(b.amplitude_m)
         values.append(block)
         errors.append(se)
+        times.append(np.asarray(b.time_s, float) if timed else np.arange(len(b), dtype=float))
+        runs.append(tuple(offset + r for r in branches(b.amplitude_m)))
+        offset += len(b)
     if any((a <= 0).any() for a in amplitude):
         raise ValueError("measured backbones have points of zero amplitude")
-    return _assemble(
+    return FitData(
         tuple(measured.labels),
         np.concatenate(curve),
         np.concatenate(amplitude),
@@ -244,24 +470,18 @@ def fit_data(measured: BackboneSet, noise_floor: Mapping[str, float] | None = No
         np.vstack(values),
         np.vstack(errors),
         measurement_levels(measured),
+        tuple(runs),
+        np.concatenate(times),
+        "s" if timed else "hold",
         floor,
+        excitation,
     )
 
 
-def _assemble(labels, curve, amplitude, channels, values, errors, levels, floor) -> FitData:
-    """FitData with the scatter across curves at the levels and per point."""
-    at_levels = _at_levels(len(labels), curve, amplitude, levels, values)
-    floors = np.array([floor[_floor_key(c)] for c in channels])
-    scatter = np.zeros((levels.size, len(channels)))
-    if len(labels) > 1:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # channels fewer than two curves have
-            scatter = np.nan_to_num(np.nanstd(at_levels, axis=0, ddof=1))
-    level_sigma = np.hypot(scatter, floors)
-    point_scatter = np.column_stack(
-        [np.interp(np.log(amplitude), np.log(levels), scatter[:, j]) for j in range(len(channels))]
-    )
-    sigma = np.sqrt(point_scatter**2 + floors**2 + errors**2)
-    return FitData(
-        labels, curve, amplitude, channels, values, sigma, levels, level_sigma, errors, floor
-    )
+def _excitation_block(curve: Backbone) -> np.ndarray:
+    """The orders :data:`HARMONIC_ORDERS` of a curve's excitation harmonics (0 where absent)."""
+    block = np.zeros((len(curve), len(HARMONIC_ORDERS)), dtype=complex)
+    if curve.excitation_harmonics is not None:
+        n_orders = min(len(HARMONIC_ORDERS), curve.excitation_harmonics.shape[1])
+        block[:, :n_orders] = curve.excitation_harmonics[:, :n_orders]
+    return block

@@ -6,12 +6,17 @@ fitted by least squares (:func:`scipy.optimize.least_squares`) so that its
 harmonic-balance backbone (:func:`identification.analytical.harmonic.backbone`) meets the
 measured ones in **both** channels: friction shows in the damping, stiffness in
 the frequency. Backbones that carry the higher harmonics of their hold fits add
-them as a third channel (:mod:`identification.fitting.data`).
+them as a third channel (:mod:`identification.fitting.data`), and each point's
+prediction is driven by the base acceleration its hold measured, harmonics
+included, so response harmonics the excitation explains are not left to the
+model's joint terms.
 
-Residuals are normalised by the standard deviations of
-:class:`~identification.fitting.data.FitData` (scatter across curves ⊕ noise
-floor). The log-likelihood is that of independent Gaussian residuals with those
-standard deviations; AIC and BIC count the fitted parameters.
+The objective is the likelihood of :class:`~identification.fitting.data.FitData`:
+the residual of the mean curve at the comparison levels, whitened by its
+covariance (between-curve scatter over the number of curves, plus the systematic
+floors), so that points of one curve are not counted as independent. AIC and BIC
+count the fitted parameters; they describe a fit, the criticism decides with
+calibrated tests instead (:mod:`identification.criticism`).
 
 Start values come from a linearised fit: for fixed shape parameters the
 single-harmonic balance is *linear* in the coefficients when evaluated at the
@@ -52,12 +57,9 @@ __all__ = [
     "evaluate",
     "fit_backbones",
     "fit_scale",
+    "natural_coefficient",
     "shape_bounds",
 ]
-
-#: Normalised residual given to a point where the model has no backbone (HB failure).
-_FAILED_RESIDUAL = 1e3
-
 
 # --------------------------------------------------------------------------
 # Fit results
@@ -82,10 +84,11 @@ class FitResult:
     weights
         Weight of each channel in the residual.
     loglik, aic, bic
-        Gaussian log-likelihood of the weighted normalised residuals and the
-        information criteria with ``n_parameters = len(free)`` (or the count given).
+        Gaussian log-likelihood of the mean residual at the levels
+        (:meth:`FitData.loglik`) and the information criteria with
+        ``n_parameters = len(free)`` (or the count given).
     n_residuals
-        Number of residual entries (points × channels with data and weight).
+        Number of residual entries (levels × channels that count).
     success, message
         Optimiser outcome.
     """
@@ -111,14 +114,21 @@ class FitResult:
 
     def level_residual(self) -> tuple[np.ndarray, np.ndarray]:
         """Mean residual over curves at the levels and its standard error."""
-        return self.data.level_mean(self.residual)
+        return self.data.mean_residual(self.predicted), self.data.level_mean(self.residual)[1]
+
+    @property
+    def chi2(self) -> float:
+        """``rᵀV⁻¹r`` of the mean residual: the likelihood's misfit (unit weights)."""
+        z = self.data.whitened(self.predicted)
+        return float(z @ z)
 
     def _rmse(self, channels: Sequence[str]) -> float | None:
         columns = [self.data.column(c) for c in channels if c in self.data.channels]
+        columns = [j for j in columns if self.data.used[j]]
         if not columns:
             return None
-        mean, _ = self.level_residual()
-        return float(np.sqrt(np.nanmean(np.sum(mean[:, columns] ** 2, axis=1))))
+        mean = self.data.mean_residual(self.predicted)
+        return float(np.sqrt(np.mean(np.sum(mean[:, columns] ** 2, axis=1))))
 
     @property
     def frequency_rmse_hz(self) -> float:
@@ -186,11 +196,8 @@ def _channel_weights(data: FitData, weights: Mapping[str, float] | None) -> np.n
 
 
 def _normalised(data: FitData, predicted: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Weighted normalised residuals of the entries that count (failures penalised)."""
-    used = np.isfinite(data.values) & (weights > 0)
-    z = weights * (data.values - predicted) / data.sigma
-    z = np.where(np.isfinite(z), z, _FAILED_RESIDUAL)
-    return z[used]
+    """Whitened weighted mean residual (the likelihood's; failures penalised)."""
+    return data.whitened(predicted, weights)
 
 
 def evaluate(
@@ -211,16 +218,15 @@ def evaluate(
     """
     method = resolve_method(method, model, data)
     w = _channel_weights(data, weights)
-    predicted = predict_channels(model, data.amplitude_m, data.channels, method=method)
-    used = np.isfinite(data.values) & (w > 0)
-    sigma = (data.sigma / np.where(w > 0, w, 1.0))[used]
-    z = ((data.values - predicted) / data.sigma * w)[used]
-    n = int(used.sum())
+    predicted = predict_channels(
+        model, data.amplitude_m, data.channels, method=method,
+        excitation_harmonics=data.excitation_harmonics,
+    )  # fmt: skip
+    n = data.metric(w).size
     k = len(free) if n_parameters is None else int(n_parameters)
-    if np.isfinite(z).all():
-        loglik = float(np.sum(-0.5 * z**2 - np.log(sigma)) - 0.5 * n * np.log(2 * np.pi))
-    else:
-        loglik, success = -np.inf, False
+    loglik = data.loglik(predicted, w)
+    if not np.isfinite(loglik):
+        success = False
         message = (message + "; " if message else "") + "no backbone at some measured amplitudes"
     return FitResult(
         model=model,
@@ -270,7 +276,7 @@ def _checked_free(model: JointModel, free: Sequence[str] | None) -> list[str]:
     return free
 
 
-def _natural_coefficient(effect: str, amplitude_m: float, omega: float, stiffness: float) -> float:
+def natural_coefficient(effect: str, amplitude_m: float, omega: float, stiffness: float) -> float:
     """Coefficient at which the term's force reaches the linear force ``k·a`` at amplitude ``a``."""
     spec = get_effect(effect)
     theta = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
@@ -406,14 +412,14 @@ def _scan_coefficient(
 ) -> JointModel:
     """Best coefficient of ``effect`` on a ± log grid, everything else fixed."""
     f = data.values[:, data.column("frequency_hz")]
-    scale = _natural_coefficient(
+    scale = natural_coefficient(
         effect, data.amplitude_m.max(), 2 * np.pi * np.median(f), _stiffness(model, data)
     )
     magnitudes = np.geomspace(1e-4, 1.0, 17)
     grid = scale * np.concatenate([-magnitudes[::-1], [0.0], magnitudes])
     predicted = predict_channels(
         model, data.amplitude_m, data.channels, method=method, parameters=grid[:, None],
-        names=[effect],
+        names=[effect], excitation_harmonics=data.excitation_harmonics,
     )  # fmt: skip
     costs = [np.sum(_normalised(data, p, weights) ** 2) for p in predicted]
     return model.with_parameters({effect: grid[int(np.argmin(costs))]})
@@ -483,10 +489,13 @@ def fit_backbones(
         if effect in free and CATALOGUE[effect].parity == "even" and model.coefficient(effect) == 0:
             start = _scan_coefficient(start, data, effect, method, w)
     # The linearised start is only as good as the single-harmonic picture; keep the better.
+    forcing = data.excitation_harmonics
     given_cost = np.sum(_normalised(data, predict_channels(
-        model, data.amplitude_m, data.channels, method=method), w) ** 2)  # fmt: skip
+        model, data.amplitude_m, data.channels, method=method, excitation_harmonics=forcing),
+        w) ** 2)  # fmt: skip
     start_cost = np.sum(_normalised(data, predict_channels(
-        start, data.amplitude_m, data.channels, method=method), w) ** 2)  # fmt: skip
+        start, data.amplitude_m, data.channels, method=method, excitation_harmonics=forcing),
+        w) ** 2)  # fmt: skip
     if given_cost < start_cost:
         start = model
     return _refine(start, data, free, method, w, weights)
@@ -546,7 +555,7 @@ def _refine(
     f = data.values[:, data.column("frequency_hz")]
     omega = 2 * np.pi * np.median(f)
     scale = np.array([
-        abs(p) if p != 0 else _natural_coefficient(n, data.amplitude_m.max(), omega,
+        abs(p) if p != 0 else natural_coefficient(n, data.amplitude_m.max(), omega,
                                                    _stiffness(start, data))
         for n, p in zip(free, p0, strict=True)
     ])  # fmt: skip
@@ -558,7 +567,7 @@ def _refine(
         """Normalised residuals of each row of ``u`` (one harmonic-balance call for all)."""
         predicted = predict_channels(
             start, data.amplitude_m, data.channels, method=method, parameters=values(u),
-            names=free,
+            names=free, excitation_harmonics=data.excitation_harmonics,
         )  # fmt: skip
         return np.stack([_normalised(data, p, weights) for p in predicted])
 

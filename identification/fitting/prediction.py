@@ -30,13 +30,18 @@ N_HARMONICS = 5
 
 def resolve_method(method: str, model: JointModel, data: FitData | None = None) -> str:
     """``"auto"``: multi-harmonic balance when the model has even terms or the data
-    harmonics, else the (much faster) single-harmonic balance."""
+    harmonics (of the response, or of the excitation that drives it), else the (much
+    faster) single-harmonic balance."""
+    harmonics = data is not None and (
+        data.has_harmonics
+        or (data.excitation_harmonics is not None and bool(data.excitation_harmonics.any()))
+    )
     if method == "auto":
         even = any(CATALOGUE[e].parity != "odd" for e in model.effects)
-        return "multi" if even or (data is not None and data.has_harmonics) else "single"
+        return "multi" if even or harmonics else "single"
     if method not in ("single", "multi"):
         raise ValueError(f"method must be 'auto', 'single' or 'multi', got {method!r}")
-    if method == "single" and data is not None and data.has_harmonics:
+    if method == "single" and harmonics:
         raise ValueError("the measured harmonics need method='multi' (or 'auto')")
     return method
 
@@ -49,21 +54,42 @@ def predict_channels(
     method: str = "single",
     parameters: ArrayLike | None = None,
     names: Sequence[str] | None = None,
+    excitation_harmonics: ArrayLike | None = None,
 ) -> np.ndarray:
     """Model prediction of each channel at the given amplitudes.
+
+    ``excitation_harmonics`` (``(n_points, n_orders)``, e.g.
+    :attr:`FitData.excitation_harmonics`) drives each point by the base acceleration
+    its hold measured (``method="multi"``; see
+    :func:`identification.analytical.harmonic.forcing_rows`); None, or all zero, is
+    the pure sine.
 
     Returns ``(n_points, n_channels)``, or ``(n_sets, n_points, n_channels)`` with
     ``parameters`` (see :func:`identification.analytical.harmonic.backbone`); NaN where the
     harmonic balance has no solution.
     """
     a = np.asarray(amplitude_m, dtype=float)
-    unique, inverse = np.unique(a, return_inverse=True)
     harmonic_channels = [c for c in channels if c in HARMONIC_CHANNELS]
     if harmonic_channels and method != "multi":
         raise ValueError(f"channels {harmonic_channels} need method='multi'")
+    forcing = None
+    if excitation_harmonics is not None:
+        forcing = np.asarray(excitation_harmonics, dtype=complex).reshape(a.size, -1)
+        if not forcing.any():
+            forcing = None
+    if forcing is None:
+        unique, inverse = np.unique(a, return_inverse=True)
+        shared = {}
+    else:  # one balance per distinct (amplitude, excitation)
+        keys = np.column_stack([a, forcing.real, forcing.imag])
+        rows, inverse = np.unique(keys, axis=0, return_inverse=True)
+        unique = rows[:, 0]
+        n_orders = forcing.shape[1]
+        shared = {"excitation_harmonics": rows[:, 1 : 1 + n_orders] + 1j * rows[:, 1 + n_orders :]}
     result = backbone(
-        model, unique, parameters=parameters, names=names, method=method, harmonics=N_HARMONICS
-    )
+        model, unique, parameters=parameters, names=names, method=method, harmonics=N_HARMONICS,
+        **shared,
+    )  # fmt: skip
     columns = []
     for channel in channels:
         if channel == "frequency_hz":
@@ -76,4 +102,4 @@ def predict_channels(
             columns.append(table[..., order] / unique)
         else:
             raise ValueError(f"unknown channel {channel!r}")
-    return np.stack(columns, axis=-1)[..., inverse, :]
+    return np.stack(columns, axis=-1)[..., inverse.reshape(-1), :]

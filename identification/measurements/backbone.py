@@ -14,7 +14,12 @@ hold fits, what else those fits measured:
 * ``excitation_harmonics``: orders ``2..H`` of the base acceleration in the same
   form, relative to *its* fundamental (the forcing's distortion);
 * ``mean_offset_m``: the mean of the relative displacement where the sensor
-  observes it (NaN at points where it does not, e.g. velocity sensors).
+  observes it (NaN at points where it does not, e.g. velocity sensors);
+* ``time_s``: when the point was measured (the centre of its hold window, s from
+  the record's start), so drift in time can be told from amplitude dependence
+  where levels were stepped up and down;
+* ``settled``: whether the response amplitude had settled over the window, and
+  ``dropped_samples``: samples the hold fit left out as sensor spikes.
 
 :class:`BackboneSet` writes and reads them as a tidy table (:data:`TABLE_COLUMNS`).
 """
@@ -65,7 +70,15 @@ def _order_columns(h: int) -> tuple[str, ...]:
 #: (what :func:`~identification.measurements.extraction.extract_backbone` fits by
 #: default); curves that carry higher orders add :func:`_order_columns` of each after
 #: these.
-TABLE_COLUMNS = (*_BASE_COLUMNS, *_order_columns(2), *_order_columns(3), "mean_offset_mm")
+TABLE_COLUMNS = (
+    *_BASE_COLUMNS,
+    *_order_columns(2),
+    *_order_columns(3),
+    "mean_offset_mm",
+    "time_s",
+    "settled",
+    "dropped_samples",
+)
 
 # Optional per-point arrays: name → (dtype, one column per harmonic order).
 _HARMONIC_FIELDS = {
@@ -111,6 +124,13 @@ class Backbone:
     mean_offset_m
         Mean of the relative displacement (m) per point, NaN where the sensor does
         not observe it; None when no point does.
+    time_s
+        Time of each point (s from the start of its record: the centre of its hold
+        window), or None.
+    settled
+        Whether each point's response amplitude had settled over its window, or None.
+    dropped_samples
+        Samples each point's hold fit dropped as sensor spikes, or None.
 
     The points are kept in the order given, so a test that steps up and down
     keeps both branches; interpolation (:meth:`frequency_at`,
@@ -128,6 +148,9 @@ class Backbone:
     harmonic_standard_error: np.ndarray | None = None
     excitation_harmonics: np.ndarray | None = None
     mean_offset_m: np.ndarray | None = None
+    time_s: np.ndarray | None = None
+    settled: np.ndarray | None = None
+    dropped_samples: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         where = f"backbone {self.label!r}" if self.label else "backbone"
@@ -199,6 +222,24 @@ class Backbone:
             offset.setflags(write=False)
             # A curve no point of which observes its mean is a curve without one.
             object.__setattr__(self, "mean_offset_m", None if np.isnan(offset).all() else offset)
+        self._check_hold_flags(where, n)
+
+    def _check_hold_flags(self, where: str, n: int) -> None:
+        """Validate and freeze the time, settling and dropped-sample arrays."""
+        for name, dtype in (("time_s", float), ("settled", bool), ("dropped_samples", int)):
+            values = getattr(self, name)
+            if values is None:
+                continue
+            raw = np.asarray(values).reshape(-1)
+            array = raw.astype(dtype)
+            if raw.size != n or (raw.dtype.kind == "f" and not np.isfinite(raw).all()):
+                raise ValueError(f"{where}: {name} must have {n} finite values, got {values!r}")
+            if dtype is not float and not (array == raw).all():
+                raise ValueError(f"{where}: {name} must be {dtype.__name__} values, got {values!r}")
+            if name == "dropped_samples" and (array < 0).any():
+                raise ValueError(f"{where}: dropped_samples must be ≥ 0")
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
 
     def __len__(self) -> int:
         return self.amplitude_m.size
@@ -366,6 +407,9 @@ class BackboneSet(Sequence[Backbone]):
                 "phase_error_deg": missing if b.phase_error_deg is None else b.phase_error_deg,
                 "source": b.source,
                 "mean_offset_mm": missing if b.mean_offset_m is None else 1e3 * b.mean_offset_m,
+                "time_s": missing if b.time_s is None else b.time_s,
+                "settled": [None] * len(b) if b.settled is None else b.settled,
+                "dropped_samples": missing if b.dropped_samples is None else b.dropped_samples,
             }
             for prefix, values in (("harmonic", b.harmonics),
                                    ("excitation_harmonic", b.excitation_harmonics)):  # fmt: skip
@@ -491,7 +535,15 @@ def _hold_fit_fields(rows: pd.DataFrame) -> dict[str, np.ndarray | None]:
     response = orders("harmonic")
     errors = [numbers(f"harmonic{h}_se") for h in response]
     offset = numbers("mean_offset_mm")
+    dropped = numbers("dropped_samples")
+    settled = None
+    if "settled" in rows and not rows["settled"].isna().all():
+        words = {True: True, False: False, "True": True, "False": False}
+        settled = rows["settled"].map(words).to_numpy()  # a hole stays NaN: the Backbone names it
     return {
+        "time_s": numbers("time_s"),
+        "settled": settled,
+        "dropped_samples": dropped,
         "harmonics": complex_parts("harmonic", response),
         "harmonic_standard_error": None
         if not errors or any(e is None for e in errors)

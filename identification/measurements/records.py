@@ -60,6 +60,7 @@ import numpy as np
 import pandas as pd
 
 from identification.artifacts import atomic_write_text
+from identification.measurements.quantities import TEST_TYPES, check_choice
 
 __all__ = [
     "CENTRE_POINT",
@@ -69,7 +70,9 @@ __all__ = [
     "Hold",
     "Modes",
     "Record",
+    "RecordFiles",
     "StepSchedule",
+    "is_trc_source",
     "read_modes",
     "read_record",
     "read_steps",
@@ -534,6 +537,16 @@ class Record:
         Linear modes of the configuration, when a modes file exists.
     path
         The file it was read from (None for records built in memory).
+    test
+        The test type (:data:`~identification.measurements.quantities.TEST_TYPES`):
+        ``phase-resonance`` (the holds), or ``free-decay`` for the decay segments of
+        the record (where the step schedule's level is 0 after a hold).
+
+    What every test record offers (the column layout's
+    :class:`~identification.measurements.columns.ColumnRecord` too): the
+    ``response`` (the centre velocity relative to the base: ``quantity``
+    velocity, ``relative``), the ``excitation`` (the base velocity:
+    ``excitation_kind`` base-velocity), ``frequency_hz``, ``steps`` and ``test``.
     """
 
     data: np.ndarray
@@ -541,9 +554,18 @@ class Record:
     name: str
     modes: Modes | None = None
     path: Path | None = None
+    test: str = "phase-resonance"
+
+    #: The response is the centre-point velocity relative to the base.
+    quantity = "velocity"
+    relative = True
+    #: The excitation is the base velocity; no force, so no forcing gain.
+    excitation_kind = "base-velocity"
+    forcing_gain = None
 
     def __post_init__(self) -> None:
         where = self.path or self.name
+        check_choice("test", self.test, TEST_TYPES)
         data = _frozen_array(self.data)
         if data.ndim != 2 or data.shape[1] != len(DATA_COLUMNS):
             raise ValueError(
@@ -612,6 +634,20 @@ class Record:
         return self.panel_velocity[:, CENTRE_POINT - 1] - self.excitation_velocity
 
     @property
+    def response(self) -> np.ndarray:
+        """The response: :attr:`response_velocity`."""
+        return self.response_velocity
+
+    @property
+    def excitation(self) -> np.ndarray:
+        """The excitation: :attr:`excitation_velocity`."""
+        return self.excitation_velocity
+
+    @property
+    def frequency_channel(self) -> np.ndarray:
+        return self.frequency_hz
+
+    @property
     def sampling_rate_hz(self) -> float:
         t = self.time_s
         return (t.size - 1) / (t[-1] - t[0])
@@ -628,6 +664,7 @@ def read_record(
     steps: str | Path | StepSchedule | None = None,
     modes: str | Path | Modes | None = None,
     progress: bool = False,
+    test: str = "phase-resonance",
 ) -> Record:
     """Read a TRC data file.
 
@@ -641,6 +678,8 @@ def read_record(
         the modes file optional.
     progress
         Show a progress bar (bytes read) for long files.
+    test
+        The record's test type (see :class:`Record`).
 
     Notes
     -----
@@ -674,7 +713,7 @@ def read_record(
         complete_lines=True,
     )
     name = path.name.split(".")[0]
-    return Record(data, steps, name, modes=modes, path=path)
+    return Record(data, steps, name, modes=modes, path=path, test=test)
 
 
 def write_record(
@@ -738,6 +777,27 @@ def _natural_key(text: str | None) -> tuple:
     return tuple((0, int(p), "") if p.isdigit() else (1, 0, p) for p in parts)
 
 
+#: Extensions of binary files, which are never TRC text tables.
+_BINARY = (".mat", ".h5", ".hdf5", ".he5", ".nc", ".npz", ".zarr")
+
+
+def _is_data_file(path: Path) -> bool:
+    return (
+        path.is_file()
+        and _DATA_RE.match(path.name) is not None
+        and path.suffix.lower() not in _BINARY
+    )
+
+
+def is_trc_source(source: str | Path) -> bool:
+    """Whether ``source`` is a TRC data file or a folder holding one (a binary file, such as
+    the HDF5 records of the force-driven rig, is never one, whatever its name)."""
+    source = Path(source)
+    if source.is_dir():
+        return any(_is_data_file(p) for p in source.iterdir())
+    return _is_data_file(source)
+
+
 def _config_files(folder: Path) -> dict[str, dict[str, Path]]:
     """Step and modes files of each configuration in ``folder``."""
     found: dict[str, dict[str, Path]] = {}
@@ -755,11 +815,47 @@ def _config_files(folder: Path) -> dict[str, dict[str, Path]]:
     return found
 
 
-class Campaign(Sequence[Record]):
-    """All TRC records of a folder, read lazily one at a time.
+class RecordFiles(Sequence):
+    """Records of files (``paths``), read lazily one at a time by index, slice or name.
+
+    Subclasses give ``folder``, ``names`` (one per path) and ``_read(index)``.
+    """
+
+    paths: list[Path] | tuple[Path, ...]
+    folder: Path
+
+    @property
+    def names(self) -> list[str]:
+        raise NotImplementedError
+
+    def _read(self, index: int):
+        raise NotImplementedError
+
+    def __len__(self) -> int:
+        return len(self.paths)
+
+    def __getitem__(self, key):  # int, slice or record name
+        if isinstance(key, str):
+            try:
+                key = self.names.index(key)
+            except ValueError:
+                raise KeyError(f"no record {key!r} in {self.folder}") from None
+        if isinstance(key, slice):
+            return [self[i] for i in range(*key.indices(len(self)))]
+        return self._read(key)
+
+    def __iter__(self) -> Iterator:
+        for i in range(len(self)):
+            yield self[i]
+
+
+class Campaign(RecordFiles):
+    """All TRC records of a folder (or one data file), read lazily one at a time.
 
     Data files are grouped with the step and modes files of their configuration
-    and ordered by (config, assembly, run), numbers in numeric order.
+    and ordered by (config, assembly, run), numbers in numeric order. A data
+    file given instead of a folder is a campaign of that one record (its step
+    and modes files beside it). Every record gets the test type ``test``.
 
     Examples
     --------
@@ -767,12 +863,15 @@ class Campaign(Sequence[Record]):
     >>> for record in campaign: ...             # doctest: +SKIP
     """
 
-    def __init__(self, folder: str | Path) -> None:
-        self.folder = Path(folder)
+    def __init__(self, folder: str | Path, test: str = "phase-resonance") -> None:
+        source = Path(folder)
+        self.test = check_choice("test", test, TEST_TYPES)
+        single = _is_data_file(source)
+        self.folder = source.parent if single else source
         if not self.folder.is_dir():
             raise ValueError(f"{self.folder}: campaign folder not found")
         configs = _config_files(self.folder)
-        paths = [p for p in self.folder.iterdir() if p.is_file() and _DATA_RE.match(p.name)]
+        paths = [source] if single else [p for p in self.folder.iterdir() if _is_data_file(p)]
         if not paths:
             raise ValueError(f"{self.folder}: no TRC data files (ConfigN_PRT_AssembA[_R])")
         parts = ("config", "assembly", "run")
@@ -798,24 +897,10 @@ class Campaign(Sequence[Record]):
             self._shared[config] = (read_steps(files["steps"]), modes)
         return self._shared[config]
 
-    def __len__(self) -> int:
-        return len(self.paths)
-
-    def __getitem__(self, key):  # int, slice or record name
-        if isinstance(key, str):
-            try:
-                key = self.names.index(key)
-            except ValueError:
-                raise KeyError(f"no record {key!r} in {self.folder}") from None
-        if isinstance(key, slice):
-            return [self[i] for i in range(*key.indices(len(self)))]
-        path = self.paths[key]
+    def _read(self, index: int) -> Record:
+        path = self.paths[index]
         steps, modes = self._config_inputs(_name_part(path.name, "config"))
-        return read_record(path, steps=steps, modes=modes)
-
-    def __iter__(self) -> Iterator[Record]:
-        for i in range(len(self)):
-            yield self[i]
+        return read_record(path, steps=steps, modes=modes, test=self.test)
 
     def __repr__(self) -> str:
         return f"<Campaign {self.folder}: {len(self)} records>"

@@ -1,7 +1,9 @@
 """The virtual test rig: phase-resonance records of a known ground truth.
 
 :class:`Rig` (:mod:`identification.rig.rig`) simulates and writes records in the
-TRC layout with the ideal PLL simulator; :class:`LabRig`
+TRC layout with the ideal PLL simulator, :class:`ForceRig`
+(:mod:`identification.rig.force`) the same test driven by a measured force, in
+the column layout; :class:`LabRig`
 (:mod:`identification.rig.lab`) measures like a laboratory: shaker distortion,
 a rippling multiply-and-low-pass PLL, drift, dropouts
 (:mod:`identification.rig.conditions`) and joint physics outside the catalogue
@@ -11,6 +13,7 @@ named scenarios of both.
 
 from typing import Any
 
+from identification.rig.force import ForceRig
 from identification.rig.lab import LabAssembly, LabRig
 from identification.rig.presets import (
     HIDDEN_EFFECT_SCENARIOS,
@@ -49,6 +52,7 @@ __all__ = [
     "LAB_NULL_SCENARIOS",
     "LAB_OUT_OF_CATALOGUE_SCENARIOS",
     "RIG_PRESETS",
+    "ForceRig",
     "LabAssembly",
     "LabRig",
     "RecordTruth",

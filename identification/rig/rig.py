@@ -486,6 +486,14 @@ class Rig:
             atomic_write_text(folder / GROUND_TRUTH_FILE, json.dumps(sidecar, indent=2))
         if failure is not None:
             raise failure
+        return self._open(folder)
+
+    def _write(self, record: Record, folder: Path, formatting: dict) -> Path:
+        """Write one record (the TRC layout)."""
+        return write_record(record, folder, **formatting)
+
+    def _open(self, folder: Path) -> Campaign:
+        """The campaign of a folder this rig wrote."""
         return Campaign(folder)
 
     def _sidecar(self, records: dict[str, Any]) -> dict[str, Any]:
@@ -517,7 +525,7 @@ def _write_job(
 ) -> tuple[Path, dict[str, Any]]:
     """Simulate and write one record; its path and truth (module level: executors pickle it)."""
     record, truth = rig._simulate_job(name, drawn, seeds, position)
-    return write_record(record, folder, **formatting), truth
+    return rig._write(record, folder, formatting), truth
 
 
 def _outcome(future) -> Any:

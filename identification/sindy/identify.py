@@ -106,6 +106,7 @@ def identify_arrays(
     *,
     n_harmonics: int = 3,
     edge_periods: float = 20.0,
+    band_hz: tuple[float, float] | None = None,
     labels: Sequence[str] | None = None,
     **options: Any,
 ) -> Identification:
@@ -126,7 +127,7 @@ def identify_arrays(
         Instantaneous excitation frequency (Hz); sets the pass band.
     effects
         Catalogue names of the library columns (e.g. :data:`.library.PAPER_LIBRARY`).
-    n_harmonics, edge_periods
+    n_harmonics, edge_periods, band_hz
         Preprocessing (:func:`~identification.measurements.signals.kinematics`).
     labels
         Names of the records for error messages (file paths).
@@ -165,7 +166,7 @@ def identify_arrays(
                                              strict=True):  # fmt: skip
         try:
             kins.append(kinematics(ti, vi, bi, fi, rate, n_harmonics=n_harmonics,
-                                   edge_periods=edge_periods))  # fmt: skip
+                                   edge_periods=edge_periods, band_hz=band_hz))  # fmt: skip
         except ValueError as exc:
             raise ValueError(f"{label}: {exc}") from None
     return identify_kinematics(kins, effects, labels=labels, **options)

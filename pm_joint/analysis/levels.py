@@ -54,14 +54,18 @@ def checked_predictions(
             f"{len(density.amplitudes_m)} levels × {len(density.channels)} channel(s) = "
             f"{density.n_dims}: pass the density the model was built with"
         )
-    if "observed_data" in idata.children and name in idata["observed_data"].data_vars:
-        observed = idata["observed_data"][name].values
+    # Where the trace keeps the measured matrix: constant_data (population matching as a
+    # potential), observed_data in posteriors written before.
+    for group, variable in (("constant_data", f"{name}_measured"), ("observed_data", name)):
+        if group not in idata.children or variable not in idata[group].data_vars:
+            continue
+        observed = idata[group][variable].values
         same = observed.shape == density.observations.shape and np.allclose(
             observed, density.observations, rtol=1e-9, atol=0
         )
         if not same:
             raise ValueError(
-                f"the density's measured values differ from observed_data/{name} of the trace: "
+                f"the density's measured values differ from {group}/{variable} of the trace: "
                 "it was fitted at other amplitude levels or to other curves; pass the density "
                 "the model was built with"
             )

@@ -19,6 +19,7 @@ from identification.criticism.criticism import criticize as criticize_model
 from identification.effects import CATALOGUE
 from identification.measurements.backbone import BackboneSet
 from identification.model import JointModel
+from pm_joint.inference.models import POPULATION_SUFFIX
 
 __all__ = ["criticize", "posterior_samples"]
 
@@ -34,6 +35,12 @@ def posterior_samples(
     parameter name (``names``) or, without ``names``, a catalogue parameter
     (``cubic_stiffness``, ``microslip.k_t``, …). At most ``max_draws`` draws are
     kept (evenly spaced), enough for a 95 % band.
+
+    A hierarchical posterior (:func:`~pm_joint.inference.hierarchical_model`)
+    gives the draws of its population's median assembly (``{p}_population``,
+    ``θ0·exp(μ)``), named ``p``: their spread is the uncertainty of the
+    population-mean curve, not the scatter of the assemblies, which is what a
+    criticism of the population's model widens its test by.
     """
     if isinstance(posterior, tuple) and len(posterior) == 2:
         keys, draws = list(posterior[0]), np.asarray(posterior[1], dtype=float)
@@ -41,15 +48,19 @@ def posterior_samples(
             raise ValueError(f"posterior draws must be (n_draws, {len(keys)}), got {draws.shape}")
         table = dict(zip(keys, draws.T, strict=True))
     else:
-        if hasattr(posterior, "children") and "posterior" in posterior.children:
-            posterior = posterior["posterior"].to_dataset()
-        variables = getattr(posterior, "data_vars", posterior)
+        variables = _variables(posterior)
         if not isinstance(variables, Mapping):
             raise ValueError(
                 f"posterior must be a DataTree, Dataset, mapping or (names, draws), "
                 f"got {type(posterior).__name__}"
             )
         table = {str(k): np.asarray(variables[k], dtype=float).reshape(-1) for k in variables}
+        population = {
+            k.removesuffix(POPULATION_SUFFIX): v
+            for k, v in table.items()
+            if k.endswith(POPULATION_SUFFIX)
+        }
+        table = population or table
     wanted = [k for k in table if (k in names if names is not None else _is_catalogue_parameter(k))]
     if not wanted:
         raise ValueError(
@@ -61,6 +72,26 @@ def posterior_samples(
         raise ValueError("posterior draws contain NaN or inf")
     keep = np.unique(np.linspace(0, draws.shape[0] - 1, min(max_draws, draws.shape[0])).astype(int))
     return wanted, draws[keep]
+
+
+def _variables(posterior: Any) -> Any:
+    """The variables of a posterior: a DataTree's ``posterior`` group, a Dataset's data
+    variables, or the object itself (a mapping)."""
+    if hasattr(posterior, "children") and "posterior" in posterior.children:
+        posterior = posterior["posterior"].to_dataset()
+    return getattr(posterior, "data_vars", posterior)
+
+
+def _posterior_kind(posterior: Any) -> str:
+    """``"mean"`` for a hierarchical posterior (its ``{p}_population`` draws are of the
+    population's median assembly), else ``"population"`` (draws spread like the assemblies,
+    as population matching gives): the criticism widens its test accordingly."""
+    variables = _variables(posterior)
+    if isinstance(variables, Mapping) and any(
+        str(k).endswith(POPULATION_SUFFIX) for k in variables
+    ):
+        return "mean"
+    return "population"
 
 
 def _is_catalogue_parameter(name: str) -> bool:
@@ -102,7 +133,9 @@ def criticize(
         its own draws are used.
     **options
         Passed on to :func:`identification.criticism.criticism.criticize`
-        (``records``, ``candidates``, ``history``, ``criterion``, ``threshold``, …).
+        (``records``, ``candidates``, ``history``, ``alpha``, …). ``posterior_kind``
+        defaults to ``"mean"`` for a hierarchical posterior (the draws of its population's
+        median assembly) and ``"population"`` otherwise.
 
     Returns
     -------
@@ -114,6 +147,8 @@ def criticize(
     if not isinstance(model, JointModel):
         names, values = posterior_samples(model)
         model, draws = _model_from_samples(names, values), (names, values)
+        options.setdefault("posterior_kind", _posterior_kind(model_or_posterior))
     if posterior is not None:
         draws = posterior_samples(posterior, names=model.parameter_names)
+        options.setdefault("posterior_kind", _posterior_kind(posterior))
     return criticize_model(model, measured, posterior=draws, **options)

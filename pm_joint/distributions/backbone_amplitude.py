@@ -1,10 +1,12 @@
-"""The paper's backbone-amplitude likelihood as a PyMC distribution.
+"""The paper's backbone-amplitude term (population matching) for PyMC.
 
 A parameter vector is scored by the joint density of the measured backbone
 values (:class:`~pm_joint.distributions.density.BackboneDensity`) at the
 forward model's prediction interpolated to the same amplitude levels. The
-posterior then describes the population of assemblies the measurements came
-from, which is what the paper's updating is after.
+posterior then describes a population range of assemblies: the paper's
+method, valid as the population's distribution where the forward model is
+one-to-one over the prior box. It is a potential, not a likelihood of the
+measured curves (:func:`BackboneAmplitude`).
 
 :func:`logp_graph` is the density as a pytensor graph (so NUTS can
 differentiate through it); :func:`BackboneAmplitude` puts it into a PyMC model.
@@ -188,13 +190,28 @@ def BackboneAmplitude(
     channels: Sequence[str] = ("frequency_hz",),
     family: str = "copula",
     density: BackboneDensity | None = None,
+    has_backbone: TensorLike | None = None,
 ) -> TensorVariable:
-    """The paper's backbone-amplitude likelihood inside a ``pm.Model``.
+    """The paper's population matching inside a ``pm.Model``: a potential, not a likelihood.
+
+    The term is ``log p(prediction)``, the log density of the forward model's
+    prediction at the amplitude levels under the population density fitted to
+    the measured curves (:class:`BackboneDensity`). The measured values enter
+    only through that density: the term is not a likelihood of the measured
+    curves, so it is a ``pm.Potential`` and ``pm.compute_log_likelihood``,
+    LOO and WAIC have nothing of it to score (:func:`pm_joint.analysis.loo`
+    says so). Its posterior over θ is the set of parameter vectors whose
+    predictions look like members of the measured population: a population
+    range, valid as the population's distribution only where the forward
+    model is one-to-one over the prior box
+    (:func:`pm_joint.analysis.identifiability` checks that at the draws);
+    else the prior box shapes the marginals.
 
     Parameters
     ----------
     name
-        Name of the observed variable.
+        Name of the potential; the prediction is the deterministic
+        ``{name}_predicted`` and the measured matrix the data ``{name}_measured``.
     backbone
         Forward-model output in the common layout, (n_points, 3).
     observed
@@ -207,15 +224,20 @@ def BackboneAmplitude(
         ``"copula"`` or ``"mvn"`` (see :class:`BackboneDensity`).
     density
         A ready :class:`BackboneDensity` (skips fitting).
+    has_backbone
+        ``(n_points,)`` probabilities that the model has a backbone point at each
+        of ``backbone``'s amplitudes (the mask channel of an amplitude-grid
+        surrogate, :meth:`~pm_joint.forward.surrogate.SurrogateOp.has_backbone`).
+        Interpolated onto the levels, their log sum (the levels taken as
+        independent) is added as the potential ``{name}_has_backbone``: a
+        parameter vector without a backbone where the curves were measured is
+        improbable by that much, with a gradient, instead of giving NaN.
 
     Notes
     -----
-    Each row of the observed matrix (one measured curve) carries 1/n_curves of
-    ``log p(prediction)``, so the sum PyMC forms is the paper's log-likelihood
-    and the measured values are kept in the trace's ``observed_data``. Draws of
-    the variable (prior/posterior predictive) are the model's prediction at the
-    levels, to be compared with the measured population. The prediction is
-    stored as the deterministic ``{name}_predicted``.
+    Posterior draws of ``{name}_predicted`` are noise-free predictions of the
+    model at the levels: their spread is the spread of θ, to be compared with
+    the measured population.
     """
     density = density or BackboneDensity.fit(
         observed, amplitudes_m, channels=channels, family=family
@@ -225,20 +247,13 @@ def BackboneAmplitude(
         interpolate_backbone(backbone, density.amplitudes_m, density.channels)
     )
     predicted = pm.Deterministic(f"{name}_predicted", predicted)
-    n_curves = density.observations.shape[0]
-
-    def logp(value, prediction):
-        return pt.zeros(value.shape[:-1]) + logp_graph(density, prediction) / n_curves
-
-    def random(prediction, rng=None, size=None):
-        shape = (*(size or ()), prediction.shape[-1])
-        return np.broadcast_to(prediction, shape).copy()
-
-    return pm.CustomDist(
-        name,
-        predicted,
-        logp=logp,
-        random=random,
-        signature="(d)->(d)",
-        observed=density.observations,
-    )
+    if has_backbone is not None:
+        backbone = pt.as_tensor_variable(backbone)
+        order = pt.argsort(backbone[:, 0])
+        probability = pt.interp(
+            density.amplitudes_m, backbone[order, 0], pt.as_tensor_variable(has_backbone)[order]
+        )
+        pm.Potential(f"{name}_has_backbone", pt.sum(pt.log(pt.clip(probability, 1e-12, 1.0))))
+    # Kept with the draws (constant_data), so a report can check the density it is given.
+    pm.Data(f"{name}_measured", density.observations)
+    return pm.Potential(name, logp_graph(density, predicted))

@@ -1,9 +1,13 @@
 """The ONNX backbone surrogate as a forward model: :class:`SurrogateOp` and its pytensor twin.
 
-Points are the surrogate's excitation levels. The Op runs the exported network
-on onnxruntime; its gradient is the backpropagation through
+Points are the surrogate's grid: its excitation levels, or its response
+amplitudes (``"amplitude_grid"``, :mod:`surrogates.runtime`). The Op runs the
+exported network on onnxruntime; its gradient is the backpropagation through
 :func:`surrogate_graph`, the same network rebuilt in pytensor from the ONNX
-initializers.
+initializers. On the amplitude grid the value channels are finite at every
+point, also where the model has no backbone: that is the mask channel's to
+say (:meth:`SurrogateOp.has_backbone`), so the likelihood sees a probability
+rather than a NaN there.
 """
 
 from __future__ import annotations
@@ -20,15 +24,17 @@ from onnx import numpy_helper
 from pytensor.gradient import pullback
 
 from pm_joint.forward.base import BACKBONE_COLUMNS, BackboneOp
-from surrogates.runtime import SurrogateRuntime
+from surrogates.runtime import MASK_CHANNEL, SurrogateRuntime
 
-__all__ = ["SurrogateOp", "surrogate_graph"]
+__all__ = ["SurrogateOp", "surrogate_channel_graph", "surrogate_graph"]
 
 
 class SurrogateOp(BackboneOp):
     """The ONNX backbone surrogate as a pytensor Op.
 
-    Points are the surrogate's excitation levels, in level order. Parameter
+    Points are the surrogate's excitation levels, in level order, or its
+    response amplitudes (the amplitude column is then the grid itself, and
+    :meth:`has_backbone` gives the mask channel's probabilities). Parameter
     vectors outside the surrogate's training box, or not finite, give NaN rows
     (counted in :attr:`n_failed`) instead of an error, so a sampler that
     proposes one mid-chain just rejects it. The gradient is the exact
@@ -63,6 +69,8 @@ class SurrogateOp(BackboneOp):
         self.parameter_names = names
         self.n_points = runtime.spec.n_levels
         self.levels = runtime.levels
+        #: The response amplitudes (m) of an amplitude-grid surrogate, else None.
+        self.amplitudes_m = runtime.amplitudes_m
         #: Columns of θ in the runtime's parameter order.
         self._order = np.array([names.index(n) for n in expected])
 
@@ -72,11 +80,28 @@ class SurrogateOp(BackboneOp):
         usable = np.isfinite(parameters).all(axis=1)
         usable[usable] = ~spec.outside_box(parameters[usable])
         out = np.full((flat.shape[0], self.n_points, 3), np.nan)
+        if self.amplitudes_m is not None:
+            out[usable, :, 0] = self.amplitudes_m
         if usable.any():
             predicted = self.runtime.predict(parameters[usable], extrapolate="allow")
             for channel, values in zip(spec.channels, np.moveaxis(predicted, -1, 0), strict=True):
-                out[usable, :, BACKBONE_COLUMNS.index(channel)] = values
+                if channel in BACKBONE_COLUMNS:
+                    out[usable, :, BACKBONE_COLUMNS.index(channel)] = values
         return out
+
+    def has_backbone(self, theta: Any) -> pt.TensorVariable:
+        """Probability that the model has a backbone point at each grid amplitude.
+
+        ``(..., n_points)``, a pytensor graph (:func:`surrogate_channel_graph`, so
+        it is differentiable) of the mask channel of an amplitude-grid surrogate.
+
+        Raises
+        ------
+        ValueError
+            For a surrogate without the mask channel (excitation levels).
+        """
+        theta = pt.as_tensor_variable(theta)
+        return surrogate_channel_graph(self.runtime, theta[..., self._order], MASK_CHANNEL)
 
     def pullback(self, inputs, outputs, cotangents):
         (theta,) = inputs
@@ -94,7 +119,7 @@ def surrogate_graph(runtime: SurrogateRuntime, theta: Any) -> pt.TensorVariable:
     """The surrogate's ONNX graph as a float64 pytensor graph, in the common layout.
 
     The ONNX nodes are translated one by one (the exported surrogate uses
-    Gemm/MatMul, Elu, Relu, Reshape, 1-D Conv, Transpose and elementwise
+    Gemm/MatMul, Elu, Relu, Reshape, 1-D Conv, Transpose, Sigmoid and elementwise
     arithmetic), with the weights read from the initializers, so pytensor can
     backpropagate through the network. Values equal onnxruntime's up to its
     float32 rounding.
@@ -110,17 +135,48 @@ def surrogate_graph(runtime: SurrogateRuntime, theta: Any) -> pt.TensorVariable:
     -------
     TensorVariable
         ``(..., n_levels, 3)``, columns :data:`BACKBONE_COLUMNS`, NaN for a
-        channel the surrogate does not predict. No box check here (that is
+        channel the surrogate does not predict; on the amplitude grid the
+        amplitude column is the grid. No box check here (that is
         :class:`SurrogateOp`'s job).
     """
     spec = runtime.spec
     theta = pt.as_tensor_variable(theta).astype("float64")
+    flat = _network_graph(runtime, theta)
+    columns = []
+    for c in BACKBONE_COLUMNS:
+        if c in spec.channels:
+            columns.append(flat[..., spec.channels.index(c)])
+        elif c == "amplitude_m" and runtime.amplitudes_m is not None:
+            columns.append(pt.zeros_like(flat[..., 0]) + runtime.amplitudes_m)
+        else:
+            columns.append(pt.full_like(flat[..., 0], np.nan))
+    backbone = pt.stack(columns, axis=-1)
+    return backbone.reshape((*[theta.shape[i] for i in range(theta.ndim - 1)], spec.n_levels, 3))
+
+
+def surrogate_channel_graph(
+    runtime: SurrogateRuntime, theta: Any, channel: str
+) -> pt.TensorVariable:
+    """One channel of the surrogate (e.g. the mask), ``(..., n_levels)``, as a pytensor graph.
+
+    ``theta`` is ``(..., n_params)`` in the runtime's parameter order.
+    """
+    spec = runtime.spec
+    if channel not in spec.channels:
+        raise ValueError(f"the surrogate has no channel {channel!r}; it has {list(spec.channels)}")
+    theta = pt.as_tensor_variable(theta).astype("float64")
+    values = _network_graph(runtime, theta)[..., spec.channels.index(channel)]
+    return values.reshape((*[theta.shape[i] for i in range(theta.ndim - 1)], spec.n_levels))
+
+
+def _network_graph(runtime: SurrogateRuntime, theta: pt.TensorVariable) -> pt.TensorVariable:
+    """The ONNX nodes translated: ``(n, n_params)`` → ``(n, n_levels, n_channels)`` float64."""
     proto = onnx.load_from_string(runtime.model_bytes)
     values: dict[str, Any] = {
         init.name: numpy_helper.to_array(init) for init in proto.graph.initializer
     }
     (graph_input,) = [i.name for i in proto.graph.input if i.name not in values]
-    values[graph_input] = theta.reshape((-1, spec.n_params))
+    values[graph_input] = theta.reshape((-1, runtime.spec.n_params))
     for node in proto.graph.node:
         translate = _ONNX_NODES.get(node.op_type)
         if translate is None:
@@ -132,15 +188,7 @@ def surrogate_graph(runtime: SurrogateRuntime, theta: Any) -> pt.TensorVariable:
         inputs = [values[name] if name else None for name in node.input]
         outputs = translate(inputs, attributes)
         values.update(zip(node.output, outputs, strict=True))
-    flat = pt.as_tensor_variable(values[proto.graph.output[0].name]).astype("float64")
-    columns = [
-        flat[..., spec.channels.index(c)]
-        if c in spec.channels
-        else pt.full_like(flat[..., 0], np.nan)
-        for c in BACKBONE_COLUMNS
-    ]
-    backbone = pt.stack(columns, axis=-1)
-    return backbone.reshape((*[theta.shape[i] for i in range(theta.ndim - 1)], spec.n_levels, 3))
+    return pt.as_tensor_variable(values[proto.graph.output[0].name]).astype("float64")
 
 
 def _as_float64(value: Any) -> Any:
@@ -215,6 +263,7 @@ _ONNX_NODES: dict[str, Callable[[list, dict], list]] = {
     "Relu": lambda inputs, _: [pt.maximum(inputs[0], 0.0)],
     "Elu": _elu,
     "Tanh": lambda inputs, _: [pt.tanh(inputs[0])],
+    "Sigmoid": lambda inputs, _: [pt.sigmoid(inputs[0])],
     "Identity": lambda inputs, _: [inputs[0]],
     "Constant": lambda _, attributes: [numpy_helper.to_array(attributes["value"])],
     "Reshape": _reshape,

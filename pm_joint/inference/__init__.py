@@ -7,12 +7,20 @@ zarr traces) with the likelihood they were sampled with.
 """
 
 from pm_joint.inference.models import (
+    HIERARCHICAL,
+    POPULATION_MATCHING,
     amplitudes_within_surrogate,
     build_model,
     hierarchical_model,
     uniform_priors,
 )
-from pm_joint.inference.sampling import SAMPLERS, continue_sampling, sample
+from pm_joint.inference.sampling import (
+    POPULATION_MODELS,
+    SAMPLER_DEFAULTS,
+    SAMPLERS,
+    continue_sampling,
+    sample,
+)
 from pm_joint.inference.storage import (
     attach_density,
     load_posterior,
@@ -22,7 +30,11 @@ from pm_joint.inference.storage import (
 )
 
 __all__ = [
+    "HIERARCHICAL",
+    "POPULATION_MATCHING",
+    "POPULATION_MODELS",
     "SAMPLERS",
+    "SAMPLER_DEFAULTS",
     "amplitudes_within_surrogate",
     "attach_density",
     "build_model",

@@ -1,17 +1,24 @@
 """The stochastic-updating models, both ordinary ``pm.Model`` objects.
 
 :func:`build_model`
-    The paper's scheme: uniform priors on the named parameters, a forward
-    model (surrogate, harmonic balance or PLL, chosen by one argument) and the
-    backbone-amplitude likelihood of the measured population. The posterior
-    describes the population of assemblies.
+    The paper's population matching: uniform priors on the named parameters,
+    a forward model (surrogate, harmonic balance or PLL, chosen by one
+    argument) and the backbone-amplitude potential of the measured population.
+    The posterior is a population range: the parameter vectors whose
+    predictions look like members of the measured population. It is the
+    population's distribution only where the forward model is one-to-one over
+    the prior box (:func:`pm_joint.analysis.identifiability`); it has no
+    likelihood of the measured curves, so LOO refuses it.
 :func:`hierarchical_model`
-    The principled alternative for population variability: one parameter
-    vector per measured curve, drawn from a population distribution, each
-    measured point Normal around its curve's harmonic-balance backbone;
-    sampled with NUTS through the differentiable harmonic-balance graph.
+    The statistical population model: one parameter vector per measured
+    curve, drawn from a population distribution, each measured point Normal
+    around its curve's harmonic-balance backbone with a noise that may change
+    with amplitude; a log-likelihood per point (LOO works), posterior
+    predictive draws of new assemblies include the population scatter
+    (:func:`pm_joint.analysis.population_predictive`). Sampled with NUTS or
+    nutpie through the differentiable harmonic-balance graph;
     :func:`pm_joint.studies.population_coverage` checks its calibration on
-    synthetic campaigns.
+    campaigns simulated with the PLL simulator.
 """
 
 from __future__ import annotations
@@ -37,6 +44,8 @@ from pm_joint.forward import BACKBONE_COLUMNS, FORWARD_KINDS, forward_model, har
 from surrogates.runtime import SurrogateRuntime
 
 __all__ = [
+    "HIERARCHICAL",
+    "POPULATION_MATCHING",
     "amplitudes_within_surrogate",
     "build_model",
     "hierarchical_model",
@@ -45,6 +54,10 @@ __all__ = [
 
 #: Relative half-width of the default prior box around an analytical model's values.
 DEFAULT_RELATIVE_SPREAD = 0.5
+#: The two population models, as ``sample`` records them (attribute ``population_model``).
+POPULATION_MATCHING, HIERARCHICAL = "population matching", "hierarchical"
+#: Suffix of the hierarchical model's population-median parameters (``{name}_population``).
+POPULATION_SUFFIX = "_population"
 
 
 def uniform_priors(bounds: Mapping[str, tuple[float, float]]) -> pt.TensorVariable:
@@ -155,9 +168,15 @@ def build_model(
     with pm.Model() as pm_model:
         theta = uniform_priors(bounds)  # validates the bounds first
         _check_reaches_levels(op, forward, bounds, density)
-        BackboneAmplitude("backbone", op(theta), observed=measured, density=density)
+        # An amplitude-grid surrogate says where the model has no backbone: a probability.
+        grid_surrogate = forward == "surrogate" and op.amplitudes_m is not None
+        mask = op.has_backbone(theta) if grid_surrogate else None
+        BackboneAmplitude(
+            "backbone", op(theta), observed=measured, density=density, has_backbone=mask
+        )
     pm_model.forward_op = op  # kept for reports and posterior-predictive backbones
     pm_model.backbone_density = density  # sample() keeps it with the draws
+    pm_model.population_model = POPULATION_MATCHING  # sample() keeps it with the draws
     return pm_model
 
 
@@ -252,19 +271,25 @@ def hierarchical_model(
     names: Sequence[str],
     *,
     amplitudes_m: ArrayLike | None = None,
+    location_scale: float = 0.5,
     population_scale: float = 0.2,
     channels: Sequence[str] = ("frequency_hz",),
+    heteroscedastic: bool = True,
     centred: bool = True,
 ) -> pm.Model:
-    """Per-curve parameters from a population distribution, for NUTS.
+    """Per-curve parameters from a population distribution, for NUTS or nutpie.
 
     Each named parameter of curve i is ``θ0 · exp(η_i)`` with θ0 the template's
     value (so signs are kept and scales are O(1)) and ``η_i ~ Normal(μ, σ)``:
-    population log-location ``μ ~ Normal(0, 0.5)`` (``log_mean``) and spread
-    ``σ ~ HalfNormal(population_scale)`` (``log_spread``) per parameter. Each
-    measured value is Normal around the curve's harmonic-balance backbone at the
-    same amplitude, with one measurement error per channel (``{channel}_noise``,
-    half-normal with the spread of the measured values as its scale).
+    population log-location ``μ ~ Normal(0, location_scale)`` (``log_mean``)
+    and spread ``σ ~ HalfNormal(population_scale)`` (``log_spread``) per
+    parameter. Each measured value is Normal around the curve's
+    single-harmonic backbone at the same amplitude. The measurement error of a
+    channel is ``σ_c (a / a_ref)^γ_c``: ``{channel}_noise`` (σ_c, half-normal
+    with the spread of the measured values as its scale) at the geometric-mean
+    amplitude ``a_ref`` and, with ``heteroscedastic``, a slope
+    ``{channel}_noise_slope`` (γ_c ~ Normal(0, 1)), as extraction noise grows
+    where the response is small.
 
     Parameters
     ----------
@@ -277,10 +302,14 @@ def hierarchical_model(
     amplitudes_m
         Amplitude levels (m) to interpolate every curve at; default (None)
         every measured point as it is, which leaves out the interpolation error.
-    population_scale
-        Scale of the half-normal prior of the spreads (relative, log scale).
+    location_scale, population_scale
+        Scales of the priors of the log-locations (normal) and of the spreads
+        (half-normal), relative, log scale.
     channels
         ``("frequency_hz",)`` or with ``"damping_ratio"``.
+    heteroscedastic
+        Let the measurement error change with amplitude (a power law);
+        False: one error per channel.
     centred
         Centred parameters ``η_i`` (default) suit curves that pin their own
         parameters, as backbones with many points do: the non-centred form
@@ -291,6 +320,9 @@ def hierarchical_model(
     -----
     ``θ0·exp(μ_p)``, the population's geometric mean (its median), is the
     deterministic ``{p}_population``; ``theta`` holds the per-curve values.
+    The observed variables (one per channel, dims ``point``) give
+    ``pm.compute_log_likelihood`` a value per measured point; the data
+    ``curve_index`` tells which curve each point belongs to.
     """
     names = list(names)
     template = model.parameters
@@ -306,9 +338,10 @@ def hierarchical_model(
     # One amplitude grid for every curve; each point then picks its curve and amplitude.
     grid, at = np.unique(amplitude, return_inverse=True)
     theta0 = np.array([template[n] for n in names])
+    log_relative_amplitude = np.log(amplitude) - np.mean(np.log(amplitude))
     coords = {"curve": measured.labels, "parameter": names, "point": np.arange(amplitude.size)}
     with pm.Model(coords=coords) as pm_model:
-        mu = pm.Normal("log_mean", 0.0, 0.5, dims="parameter")
+        mu = pm.Normal("log_mean", 0.0, location_scale, dims="parameter")
         sigma = pm.HalfNormal("log_spread", population_scale, dims="parameter")
         if centred:
             eta = pm.Normal("eta", mu, sigma, dims=("curve", "parameter"))
@@ -317,15 +350,22 @@ def hierarchical_model(
             eta = mu + sigma * z
         theta = pm.Deterministic("theta", theta0 * pt.exp(eta), dims=("curve", "parameter"))
         for j, name in enumerate(names):
-            pm.Deterministic(f"{name}_population", theta0[j] * pt.exp(mu[j]))
+            pm.Deterministic(f"{name}{POPULATION_SUFFIX}", theta0[j] * pt.exp(mu[j]))
         backbone = harmonic_backbone_graph(model, theta, names, grid)
         pm.Data("amplitude_m", amplitude, dims="point")
+        pm.Data("curve_index", curve, dims="point")
         for channel in channels:
             # Data, not constants: campaigns on the same points then share one compiled graph.
             observed = pm.Data(f"{channel}_measured", values[channel], dims="point")
             noise = pm.HalfNormal(f"{channel}_noise", observed.std())
+            if heteroscedastic:
+                slope = pm.Normal(f"{channel}_noise_slope", 0.0, 1.0)
+                noise = noise * pt.exp(slope * log_relative_amplitude)
             predicted = backbone[curve, at, BACKBONE_COLUMNS.index(channel)]
             pm.Normal(channel, predicted, noise, observed=observed, dims="point")
+    pm_model.population_model = HIERARCHICAL  # sample() keeps it with the draws
+    pm_model.template = model
+    pm_model.varying = names
     return pm_model
 
 

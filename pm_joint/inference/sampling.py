@@ -1,16 +1,17 @@
-"""Sampling the updating models with PyMC, to memory or to a trace folder as it goes.
+"""Sampling the updating models by sampler name, to memory or to a trace folder as it goes.
 
-:func:`sample` runs PyMC's samplers (Metropolis as in the paper, DEMetropolisZ,
-NUTS where gradients exist) and returns an arviz DataTree, optionally writing
-the draws to a zarr folder as they come; :func:`continue_sampling` carries a
-stopped run on from that folder.
+:func:`sample` runs PyMC's samplers (Metropolis as in the paper, with its proposal
+covariance learned while tuning; DEMetropolisZ; NUTS) or nutpie's NUTS and
+returns an arviz DataTree, optionally writing the draws to a folder as they come
+(:mod:`~pm_joint.inference.traces`); :func:`continue_sampling` carries a stopped
+run on from that folder.
 """
 
 from __future__ import annotations
 
-import contextlib
+import json
 import os
-import warnings
+import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -18,13 +19,30 @@ import numpy as np
 import pymc as pm
 import xarray as xr
 from pymc.blocking import DictToArrayBijection
-from pymc.stats.convergence import log_warnings, run_convergence_checks
 
+from pm_joint.inference.steps import CovarianceMetropolis
 from pm_joint.inference.storage import attach_density, load_posterior
+from pm_joint.inference.traces import DrawWriter, start_trace
 
-__all__ = ["SAMPLERS", "continue_sampling", "sample"]
+__all__ = ["POPULATION_MODELS", "SAMPLERS", "SAMPLER_DEFAULTS", "continue_sampling", "sample"]
 
-SAMPLERS = ("metropolis", "demetropolisz", "nuts")
+#: The samplers by name.
+SAMPLERS = ("metropolis", "demetropolisz", "nuts", "nutpie")
+#: The population models of ``pm-joint update --population``.
+POPULATION_MODELS = ("matching", "hierarchical")
+#: Sampler, draws and tuning steps per chain by (population model, forward model).
+#: Population matching keeps the paper's Metropolis (its covariance now learned while
+#: tuning) on the forward models without a pytensor gradient (the onnxruntime surrogate,
+#: the PLL simulator). On the differentiable harmonic-balance graph nutpie is the
+#: default: side by side on that posterior it reached 35.1 min-ESS/s and PyMC's NUTS 30.6
+#: (issue #17; bench/sampling.py measures every sampler there). The hierarchical model
+#: has a parameter vector per curve (over a hundred dimensions): gradient samplers only.
+SAMPLER_DEFAULTS = {
+    ("matching", "surrogate"): {"sampler": "metropolis", "draws": 30_000, "tune": 3_000},
+    ("matching", "pll"): {"sampler": "metropolis", "draws": 30_000, "tune": 3_000},
+    ("matching", "harmonic"): {"sampler": "nutpie", "draws": 2_000, "tune": 1_000},
+    ("hierarchical", "harmonic"): {"sampler": "nutpie", "draws": 1_000, "tune": 1_000},
+}
 
 
 def sample(
@@ -38,7 +56,7 @@ def sample(
     random_seed: int | None = 0,
     progressbar: bool = True,
     trace: str | os.PathLike | None = None,
-    trace_chunk: int = 100,
+    trace_chunk: int = 500,
     step_options: Mapping | None = None,
     initvals: Sequence[Mapping] | Mapping | None = None,
 ) -> xr.DataTree:
@@ -47,56 +65,83 @@ def sample(
     Parameters
     ----------
     sampler
-        ``"metropolis"`` (PyMC's Metropolis, one scalar coordinate at a time
-        as in the paper, all coordinates in one step so that one logp function
-        is compiled), ``"demetropolisz"`` (joint differential-evolution
-        proposals) or ``"nuts"`` (needs a differentiable forward model).
+        ``"metropolis"``: PyMC's Metropolis, the paper's sampler, with its proposal
+        covariance learned while tuning (:class:`~pm_joint.inference.steps.CovarianceMetropolis`:
+        a coordinate-wise pilot, then joint proposals; ``step_options=
+        {"adapt_covariance": False}`` keeps the paper's coordinate-wise proposals
+        throughout). ``"demetropolisz"``: PyMC's
+        differential-evolution Metropolis. ``"nuts"``: PyMC's NUTS, ``"nutpie"``: nutpie's
+        NUTS (numba backend); both need a differentiable forward model.
     trace
-        A zarr folder: draws are written there as they are taken, so an
+        A folder: draws are written there as they are taken
+        (:class:`~pm_joint.inference.traces.DrawWriter`, zarr 2 or 3), so an
         interrupted run leaves the draws so far; :func:`load_posterior` reads them.
+        Not with ``nutpie``, which keeps its draws in memory here.
     trace_chunk
-        Draws per chain written at a time to ``trace`` (at most that many are
+        Steps per chain written at a time to ``trace`` (at most that many are
         lost when a run is killed).
     step_options
-        Keywords of the PyMC step method (e.g. ``target_accept`` for NUTS;
-        ``blocked=False`` gives PyMC's default Metropolis, one step and one
-        compiled function per variable).
+        Keywords of the step method (e.g. ``target_accept`` for NUTS and nutpie;
+        ``tune_interval`` for Metropolis).
     initvals
-        Starting points (one mapping, or one per chain), as ``pm.sample`` takes them.
+        Starting points (one mapping, or one per chain), as ``pm.sample`` takes
+        them (the PyMC samplers only).
 
     Notes
     -----
     The step's logp function is compiled (numba) and run once before the chains
     start, so forked chain processes share that work instead of repeating it.
-    The DataTree's ``sampler`` attribute names the sampler; a model of
-    :func:`~pm_joint.inference.models.build_model` also leaves its likelihood
-    density there (:func:`~pm_joint.inference.storage.stored_density`).
+    The DataTree's ``sampler`` attribute names the sampler and ``free_variables``
+    lists the model's free variables (what a convergence verdict judges); a
+    model of :func:`~pm_joint.inference.models.build_model` also leaves its
+    likelihood density there (:func:`~pm_joint.inference.storage.stored_density`).
     """
     if sampler not in SAMPLERS:
         raise ValueError(f"sampler must be one of {SAMPLERS}, got {sampler!r}")
     options = dict(step_options or {})
-    kwargs = {}
-    own_pickles = contextlib.nullcontext()
-    if trace is not None:
-        kwargs = {
-            "trace": pm.backends.ZarrTrace(
-                store=str(trace), draws_per_chunk=min(trace_chunk, tune + draws)
-            ),
-            # PyMC would read the trace back through xarray's zarr-3 reader, which
-            # fails with zarr 2 installed: load_posterior reads it below.
-            "return_inferencedata": False,
-            "compute_convergence_checks": False,
-        }
-        own_pickles = _decoding_own_pickles()
-    with pm_model, own_pickles, warnings.catch_warnings():
-        warnings.filterwarnings("ignore", "`return_inferencedata=False` is deprecated")
-        step = {
-            "metropolis": lambda: pm.Metropolis(**{"blocked": True, **options}),
-            "demetropolisz": lambda: pm.DEMetropolisZ(**options),
-            "nuts": lambda: pm.NUTS(**options),
-        }[sampler]()
+    if sampler == "nutpie":
+        if trace is not None:
+            raise ValueError(
+                "sampler 'nutpie' keeps its draws in memory: use 'nuts' (or a Metropolis "
+                "sampler) for draws written to a trace folder as they are taken"
+            )
+        idata = _sample_nutpie(pm_model, draws, tune, chains, cores, random_seed, progressbar,
+                               options)  # fmt: skip
+    else:
+        idata = _sample_pymc(
+            pm_model, sampler, draws, tune, chains, cores, random_seed, progressbar, trace,
+            trace_chunk, options, initvals,
+        )  # fmt: skip
+    idata.attrs["sampler"] = sampler
+    idata.attrs["free_variables"] = json.dumps([rv.name for rv in pm_model.free_RVs])
+    for key in ("population_model",):
+        if hasattr(pm_model, key):
+            idata.attrs[key] = getattr(pm_model, key)
+    density = getattr(pm_model, "backbone_density", None)
+    if density is not None:  # the likelihood travels with its draws, to reports and files
+        attach_density(idata, density)
+    return idata
+
+
+def _sample_pymc(
+    pm_model, sampler, draws, tune, chains, cores, random_seed, progressbar, trace, trace_chunk,
+    options, initvals,
+) -> xr.DataTree:  # fmt: skip
+    """One ``pm.sample`` call with the named PyMC step, optionally writing a trace folder."""
+    with pm_model:
+        if sampler == "metropolis":
+            step = CovarianceMetropolis(**options)
+            step.set_tune_steps(tune)
+        elif sampler == "demetropolisz":
+            step = pm.DEMetropolisZ(**options)
+        else:
+            step = pm.NUTS(**options)
         _compile_now(step, pm_model.initial_point())
-        idata = pm.sample(
+        kwargs = {}
+        if trace is not None:
+            start_trace(trace, pm_model, tune=tune, draws=draws, chains=chains, sampler=sampler)
+            kwargs["trace"] = DrawWriter(trace, chunk=min(trace_chunk, tune + draws))
+        return pm.sample(
             draws=draws,
             tune=tune,
             chains=chains,
@@ -107,14 +152,26 @@ def sample(
             initvals=initvals,
             **kwargs,
         )
-    if trace is not None:
-        idata = load_posterior(trace)
-        log_warnings(run_convergence_checks(idata, pm_model))
-    idata.attrs["sampler"] = sampler
-    density = getattr(pm_model, "backbone_density", None)
-    if density is not None:  # the likelihood travels with its draws, to reports and files
-        attach_density(idata, density)
-    return idata
+
+
+def _sample_nutpie(
+    pm_model, draws, tune, chains, cores, random_seed, progressbar, options
+) -> xr.DataTree:
+    """nutpie's NUTS on the PyMC model (compiled with numba), in PyMC's DataTree layout."""
+    import nutpie
+
+    compiled = nutpie.compile_pymc_model(pm_model, backend="numba")
+    start = time.perf_counter()
+    idata = nutpie.sample(
+        compiled, draws=draws, tune=tune, chains=chains,
+        cores=cores or min(chains, os.cpu_count() or 1), seed=random_seed,
+        progress_bar=progressbar, save_warmup=False, **options,
+    )  # fmt: skip
+    seconds = time.perf_counter() - start
+    groups = {f"/{name}": node.to_dataset() for name, node in idata.children.items()}
+    for name in ("posterior", "sample_stats"):
+        groups[f"/{name}"].attrs.update(sampling_time=seconds, tuning_steps=tune)
+    return xr.DataTree.from_dict(groups)
 
 
 def continue_sampling(
@@ -140,10 +197,10 @@ def continue_sampling(
 
     Notes
     -----
-    The step's tuned state is stored in the trace only as a pickle, which is
-    not read back (a trace may come from someone else): the step is tuned
-    again instead, starting from posterior draws, so every kept draw is still a
-    draw of the posterior. The first part's draws are not changed.
+    The step's tuned state (scales, proposal covariance) is not stored in the
+    trace: the step is tuned again, starting from posterior draws, so every
+    kept draw is still a draw of the posterior. The first part's draws are not
+    changed.
     """
     trace = Path(trace)
     done = load_posterior(trace)
@@ -176,31 +233,6 @@ def _joined(first: xr.DataTree, second: xr.DataTree) -> xr.Dataset:
     common = [v for v in first.data_vars if v in second.data_vars]
     joined = xr.concat([first[common], second[common]], dim="draw")
     return joined.assign_coords(draw=np.arange(joined.sizes["draw"]))
-
-
-@contextlib.contextmanager
-def _decoding_own_pickles():
-    """Let numcodecs unpickle while ZarrTrace updates the sampler states it pickled itself.
-
-    ZarrTrace keeps each chain's step state as a pickle and reads that chunk back
-    when it writes the next one; numcodecs ≥ 0.15 refuses to unpickle unless the
-    process opts in. The store was created (overwritten) by this run, so what is
-    unpickled is this run's own data. The environment variable carries the opt-in
-    to chain processes that are spawned rather than forked.
-    """
-    from numcodecs import pickles
-
-    previous = pickles.ALLOW_UNSAFE_PICKLE_DECODE, os.environ.get(pickles._ENV_VAR)
-    pickles.ALLOW_UNSAFE_PICKLE_DECODE = True
-    os.environ[pickles._ENV_VAR] = "1"
-    try:
-        yield
-    finally:
-        pickles.ALLOW_UNSAFE_PICKLE_DECODE = previous[0]
-        if previous[1] is None:
-            os.environ.pop(pickles._ENV_VAR, None)
-        else:
-            os.environ[pickles._ENV_VAR] = previous[1]
 
 
 def _compile_now(step, point: Mapping[str, np.ndarray]) -> None:

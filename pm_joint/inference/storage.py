@@ -2,7 +2,7 @@
 
 :func:`save_posterior` writes a DataTree atomically with the hash of its draws,
 the versions that made it and the likelihood density it was sampled with;
-:func:`load_posterior` checks the hash and also reads the zarr folders
+:func:`load_posterior` checks the hash and also reads the trace folders
 :func:`~pm_joint.inference.sampling.sample` writes as it goes (interrupted runs
 included); :func:`stored_density` gives the density back, so a report draws
 exactly what was sampled.
@@ -22,6 +22,7 @@ import xarray as xr
 
 from identification.artifacts import check_sha256, versions
 from pm_joint.distributions import BackboneDensity
+from pm_joint.inference.traces import read_trace
 
 __all__ = [
     "attach_density",
@@ -81,77 +82,24 @@ def save_posterior(
 
 
 def load_posterior(path: str | os.PathLike) -> xr.DataTree:
-    """Read a posterior: a netCDF file of :func:`save_posterior`, or a zarr trace folder.
+    """Read a posterior: a netCDF file of :func:`save_posterior`, or a trace folder.
 
-    A zarr folder written by :func:`sample` (``trace=``) is read whether the run
-    finished or was interrupted; an interrupted run gives the posterior draws
-    every chain had written (the same number per chain), without its tuning steps.
+    A trace folder written by :func:`~pm_joint.inference.sampling.sample`
+    (``trace=``; :func:`~pm_joint.inference.traces.read_trace`) is read whether
+    the run finished or was interrupted; an interrupted run gives the posterior
+    draws every chain had written (the same number per chain), without its
+    tuning steps.
     """
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such posterior file or trace folder")
     if path.is_dir():
-        return _read_zarr_trace(path)
+        return read_trace(path)
     idata = xr.open_datatree(path).load()
     expected = idata.attrs.get("pm_joint_posterior_sha256")
     if expected is not None:
         check_sha256(expected, posterior_sha256(idata), str(path), "the posterior draws")
     return idata
-
-
-def _read_zarr_trace(path: Path) -> xr.DataTree:
-    import zarr
-
-    try:
-        root = zarr.open_group(str(path), mode="r")
-        state = root["_sampling_state"]
-    except (KeyError, ValueError, zarr.errors.GroupNotFoundError):
-        raise ValueError(f"{path}: not a zarr trace written by pm_joint.sample") from None
-    tune = int(state["tuning_steps"][...])
-    written = int(np.min(state["draw_idx"][:]))  # tuning steps + draws every chain has written
-    # Until a run ends, the posterior arrays hold the tuning steps first.
-    offset = 0 if "warmup_posterior" in root.group_keys() else tune
-    total = tune + root["posterior"]["draw"].shape[0] - offset
-    if written <= tune:
-        raise ValueError(
-            f"{path}: the run was stopped while tuning ({written} of {tune} tuning steps "
-            "written): no posterior draws yet"
-        )
-    draws = slice(offset, offset + written - tune)
-    groups = {
-        f"/{name}": _zarr_dataset(root[name], draws)
-        for name in ("posterior", "sample_stats", "observed_data", "constant_data")
-        if name in root.group_keys()
-    }
-    stats = groups["/sample_stats"].drop_vars("in_warmup")  # the tuning steps are cut off
-    prefix = "sampler_0__"  # one step method: PyMC's usual stat names carry no prefix
-    if all(n.startswith(prefix) for n in stats.data_vars):
-        stats = stats.rename({n: n.removeprefix(prefix) for n in stats.data_vars})
-    groups["/sample_stats"] = stats
-    tree = xr.DataTree.from_dict(groups)
-    tree.attrs.update(
-        tuning_steps=tune,
-        sampling_time=float(state["sampling_time"][...]),
-        interrupted=int(written < total),
-    )
-    return tree
-
-
-def _zarr_dataset(group, draws: slice) -> xr.Dataset:
-    """A zarr-2 group written in xarray's layout, its ``draw`` axis cut to ``draws``."""
-    variables, coords = {}, {}
-    for name, array in group.arrays():
-        dims = tuple(array.attrs["_ARRAY_DIMENSIONS"])
-        if array.dtype == object:  # pickled sampler warnings: nothing to read back safely
-            continue
-        if dims == (name,):
-            coords[name] = array[draws] if name == "draw" else array[:]
-        else:
-            index = tuple(draws if d == "draw" else slice(None) for d in dims)
-            variables[name] = (dims, array.get_orthogonal_selection(index))
-    if "draw" in coords:
-        coords["draw"] = np.arange(len(coords["draw"]))
-    return xr.Dataset(variables, coords=coords)
 
 
 def attach_density(idata: xr.DataTree, density: BackboneDensity) -> None:

@@ -1,0 +1,99 @@
+"""Whether a fitted model can be read as physics: admissibility and where it has no solution.
+
+A catalogue effect that lowers the misfit is not yet an explanation. Its fitted
+coefficients must describe a joint a resonance test could have measured
+(:func:`admissibility`):
+
+* **non-negative dissipation** over the tested range: the total equivalent damping
+  (the predicted damping ratio) ≥ 0 at every level — a phase-locked test feeds
+  power in at every level;
+* **friction and slip forces oppose the motion**: effects whose physics has a sign
+  (:attr:`identification.effects.Effect.coefficient_sign`) have it;
+* **no large cancelling terms**: where the terms' equivalent stiffnesses (or
+  dampings) ``c_i k_eq,i(a)`` add up in absolute value to much more than their net
+  sum (``Σ|c_i k_eq,i| > CANCELLATION · |Σ c_i k_eq,i|``), the fit trades terms
+  against each other (a 4× linear stiffness cancelled by a large tanh) and none of
+  them reads as physics;
+* a periodic solution at every level (:func:`no_solution`, in words).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from identification.effects import CATALOGUE
+from identification.model import JointModel
+
+__all__ = ["CANCELLATION", "admissibility", "no_solution"]
+
+#: Ratio of the sum of absolute term contributions to their net sum beyond which the
+#: terms are said to cancel (a physical softening-then-hardening joint stays near 1).
+CANCELLATION = 2.0
+
+
+def no_solution(levels_m: np.ndarray, predicted: np.ndarray) -> str | None:
+    """Where a prediction at the levels (``(n_levels, n_channels)``) has no periodic
+    solution, in words (None where it has one at every level)."""
+    failed = ~np.isfinite(predicted).all(axis=1)
+    if not failed.any():
+        return None
+    mm = 1e3 * levels_m
+    if failed.all():
+        return "no periodic solution at any tested amplitude"
+    solved = np.flatnonzero(~failed)
+    if not failed[solved[0] : solved[-1] + 1].any():  # the failures are at the ends
+        if not failed[: solved[0]].any():
+            return f"no periodic solution above {mm[solved[-1]]:.2g} mm"
+        if not failed[solved[-1] + 1 :].any():
+            return f"no periodic solution below {mm[solved[0]]:.2g} mm"
+    return "no periodic solution at " + ", ".join(f"{a:.2g}" for a in mm[failed]) + " mm"
+
+
+def admissibility(
+    model: JointModel, levels_m: np.ndarray, frequency_hz: np.ndarray, damping_ratio: np.ndarray
+) -> list[str]:
+    """What makes a fitted model inadmissible as physics, in words (empty: admissible).
+
+    ``frequency_hz`` and ``damping_ratio`` are the model's predictions at the levels.
+    """
+    problems = []
+    where = no_solution(levels_m, np.column_stack([frequency_hz, damping_ratio]))
+    if where:
+        problems.append(where)
+    ok = np.isfinite(frequency_hz) & np.isfinite(damping_ratio)
+    mm = 1e3 * levels_m
+    negative = ok & (damping_ratio < 0)
+    if negative.any():
+        problems.append(
+            f"negative total damping (energy fed in by the joint) at {mm[negative].min():.2g}–"
+            f"{mm[negative].max():.2g} mm"
+        )
+    for term in model.terms:
+        sign = CATALOGUE[term.effect].coefficient_sign
+        if sign and np.sign(term.coefficient) == -sign:
+            problems.append(
+                f"{term.effect} has a negative coefficient ({term.coefficient:.3g}): a friction "
+                "or slip force that pushes the motion instead of opposing it"
+            )
+    if ok.any():
+        omega = 2 * np.pi * frequency_hz[ok]
+        a = levels_m[ok]
+        parts = []
+        for term in model.terms:
+            k_eq, c_eq = CATALOGUE[term.effect].describing(a, omega, **term.shape)
+            parts.append((term.effect, term.coefficient * k_eq, term.coefficient * c_eq))
+        for index, kind in ((1, "stiffness"), (2, "damping")):
+            values = np.array([p[index] for p in parts])
+            net = np.abs(values.sum(axis=0))
+            gross = np.abs(values).sum(axis=0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = np.where(net > 0, gross / net, np.inf)
+            worst = int(np.argmax(ratio))
+            if ratio[worst] > CANCELLATION and gross[worst] > 0:
+                largest = sorted(parts, key=lambda p: -abs(p[index][worst]))[:2]
+                words = " against ".join(f"{p[0]} ({p[index][worst]:+.3g})" for p in largest)
+                problems.append(
+                    f"terms cancel in the equivalent {kind}: their sizes add up to "
+                    f"{ratio[worst]:.1f}× the net at {1e3 * a[worst]:.2g} mm ({words})"
+                )
+    return problems

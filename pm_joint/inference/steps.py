@@ -1,0 +1,187 @@
+"""PyMC's Metropolis with its proposal covariance learned while tuning.
+
+The paper samples with PyMC's Metropolis, one scalar coordinate at a time with
+a scale tuned per coordinate. On a posterior whose parameters are correlated
+(as the population-matching posterior is: several parameters move the
+backbone alike) such chains crawl: the demo's 2 × 15 000 draws ended with r̂ up
+to 1.16 and bulk ESS of 16–118. :class:`CovarianceMetropolis` keeps PyMC's
+Metropolis (its proposal, acceptance and scale tuning) and adds what PyMC's
+Metropolis takes but does not learn, a proposal covariance: the first part of
+tuning is the paper's coordinate-wise Metropolis (a pilot run), then the
+chain proposes jointly from a normal with the covariance of its own pilot
+draws (Haario et al.'s adaptive Metropolis, re-estimated over doubling
+windows as Stan does for its mass matrix), scaled by 2.38/√d and tuned to
+PyMC's acceptance band. After tuning, the proposal is fixed, so the draws are
+those of a plain Metropolis–Hastings chain.
+"""
+
+from __future__ import annotations
+
+from dataclasses import field
+from typing import Any, ClassVar
+
+import numpy as np
+import pymc as pm
+from pymc.step_methods.metropolis import (
+    MetropolisState,
+    MultivariateNormalProposal,
+    NormalProposal,
+)
+from pymc.step_methods.state import dataclass_state
+
+__all__ = ["CovarianceMetropolis"]
+
+
+@dataclass_state
+class CovarianceMetropolisState(MetropolisState):
+    """PyMC's Metropolis state plus the proposal and where the adaptation stands.
+
+    ``elemwise_update`` is not frozen here: the proposal turns joint while tuning.
+    """
+
+    elemwise_update: bool
+    proposal_dist: Any
+    tune_steps: int | None = field(metadata={"frozen": True})
+    _step_count: int
+    _window_ends: list
+    _window_start: int
+    _pilot: list
+
+
+class CovarianceMetropolis(pm.Metropolis):
+    """Metropolis whose tuning learns a joint proposal covariance from pilot draws.
+
+    Parameters
+    ----------
+    vars
+        Value variables (default: every free variable of the model), all in one step.
+    adapt_covariance
+        False: the paper's Metropolis throughout (coordinate-wise proposals,
+        each coordinate's scale tuned), for comparison.
+    pilot_fraction
+        Share of the tuning steps run coordinate-wise (the paper's Metropolis)
+        before the first covariance is estimated.
+    final_fraction
+        Share of the tuning steps at the end in which only the scale is tuned
+        (the last covariance stays).
+    **kwargs
+        PyMC's Metropolis options (``tune_interval``, ``scaling``, ...).
+
+    Notes
+    -----
+    The sampler statistic ``logp_inf`` is True where the proposal's log
+    density was −inf: in the updating models that is a forward model that
+    returned NaN (the likelihood's only −inf), so it counts the NaN rate.
+    """
+
+    name = "metropolis"
+    default_blocked = True  # one step over every variable: one compiled logp
+    stats_dtypes_shapes: ClassVar = {**pm.Metropolis.stats_dtypes_shapes, "logp_inf": (bool, [])}
+    _state_class = CovarianceMetropolisState
+
+    def __init__(
+        self,
+        vars=None,
+        *,
+        adapt_covariance: bool = True,
+        pilot_fraction: float = 0.2,
+        final_fraction: float = 0.15,
+        **kwargs,
+    ) -> None:
+        if not (pilot_fraction > 0 and final_fraction >= 0 and pilot_fraction + final_fraction < 1):
+            raise ValueError("pilot_fraction and final_fraction must leave room for adaptation")
+        super().__init__(vars, **kwargs)
+        self.adapt_covariance = adapt_covariance
+        self.pilot_fraction = pilot_fraction
+        self.final_fraction = final_fraction
+        self.n_dims = int(self.proposal_dist.s.size)
+        self.tune_steps = None  # told by the sampler (set_tune_steps); else no covariance
+        self._reset_adaptation()
+
+    # -- tuning schedule --------------------------------------------------------
+
+    def set_tune_steps(self, tune: int) -> None:
+        """How many tuning steps the chain will take (the windows depend on it)."""
+        self.tune_steps = int(tune)
+        self._reset_adaptation()
+
+    def _windows(self) -> list[int]:
+        """Step counts at which the covariance is re-estimated."""
+        if not (self.adapt_covariance and self.tune_steps):
+            return []
+        start = int(self.pilot_fraction * self.tune_steps)
+        stop = int((1 - self.final_fraction) * self.tune_steps)
+        if start < max(10 * self.n_dims, 20) or stop <= start:
+            return []  # too few steps for a covariance: stay coordinate-wise
+        ends, width = [start], start
+        while ends[-1] + 2 * width <= stop:
+            width *= 2
+            ends.append(ends[-1] + width)
+        if ends[-1] < stop:
+            ends[-1] = stop  # the last window takes the rest, as Stan's does
+        return ends
+
+    def _reset_adaptation(self) -> None:
+        self._step_count = 0
+        self._window_ends = self._windows()
+        self._window_start = 0
+        self._pilot: list[np.ndarray] = []
+        self._set_coordinatewise()
+
+    def _set_coordinatewise(self) -> None:
+        self.proposal_dist = NormalProposal(np.ones(self.n_dims))
+        self._set_elementwise(True)
+        self.scaling = np.ones(self.n_dims)
+
+    def _set_joint(self, covariance: np.ndarray) -> None:
+        self.proposal_dist = MultivariateNormalProposal(covariance)
+        self._set_elementwise(False)
+        self.scaling = np.atleast_1d(2.38 / np.sqrt(self.n_dims))
+
+    def _set_elementwise(self, elementwise: bool) -> None:
+        n = self.n_dims if elementwise else 1
+        self.elemwise_update = elementwise
+        self.enum_dims = np.arange(n, dtype=int)
+        self.accept_rate_iter = np.zeros(n, dtype=float)
+        self.accepted_iter = np.zeros(n, dtype=bool)
+        self.accepted_sum = np.zeros(n, dtype=int)
+        self.steps_until_tune = self.tune_interval
+
+    def reset_tuning(self) -> None:
+        super().reset_tuning()
+        self._reset_adaptation()
+
+    # -- one step ---------------------------------------------------------------
+
+    def astep(self, q0):
+        q, stats = super().astep(q0)
+        stats[0]["logp_inf"] = bool(np.any(np.isneginf(self.accept_rate_iter)))
+        if self.tune and self._window_ends:
+            self._pilot.append(np.array(q.data, dtype=float))
+            self._step_count += 1
+            if self._window_ends and self._step_count == self._window_ends[0]:
+                self._window_ends.pop(0)
+                draws = np.array(self._pilot[self._window_start :])
+                self._window_start = len(self._pilot)
+                covariance = _regularised_covariance(draws)
+                if covariance is not None:
+                    self._set_joint(covariance)
+        return q, stats
+
+
+def _regularised_covariance(draws: np.ndarray) -> np.ndarray | None:
+    """Sample covariance shrunk towards a small diagonal (Stan's regularisation).
+
+    None where the window never moved (a stuck chain gives no direction to learn).
+    """
+    n = draws.shape[0]
+    covariance = np.atleast_2d(np.cov(draws, rowvar=False))
+    scale = np.diag(covariance)
+    if not np.all(np.isfinite(covariance)) or np.any(scale <= 0):
+        return None
+    shrunk = (n / (n + 5.0)) * covariance + 1e-3 * (5.0 / (n + 5.0)) * np.diag(scale)
+    try:
+        np.linalg.cholesky(shrunk)
+    except np.linalg.LinAlgError:
+        return None
+    return shrunk

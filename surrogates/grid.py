@@ -1,0 +1,258 @@
+"""Backbones on a fixed grid of response amplitudes: a representation every parameter set has.
+
+At a response amplitude ``a`` (m) the harmonic balance gives the phase-resonant
+frequency, the damping ratio and the base-acceleration amplitude ``A(a)`` the
+backbone needs there (:func:`identification.analytical.harmonic.backbone`). On a
+fixed amplitude grid these exist for every parameter vector, wherever the model
+has a backbone at all; the **mask channel** ``has_backbone`` says where it has
+none, one of (:data:`MASK_REASONS`):
+
+``"no_solution"``
+    no phase-resonant periodic solution (no positive stiffness) or the
+    harmonic balance did not converge;
+``"no_power_input"``
+    ``A(a) ≤ 0``: the damping is negative there, the structure would self-excite
+    rather than need a base excitation;
+``"passed"``
+    ``A(a)`` is not above every level already needed at a smaller amplitude, or
+    falls there: a test stepping its level up jumps past this amplitude (the
+    first crossing is the branch it follows, as
+    :func:`~surrogates.dataset.generate_dataset`'s excitation-level inversion
+    takes it).
+
+``A(a)`` is evaluated on a refined grid (``refine`` points per grid interval and
+a lead-in below the first amplitude down to ``1 / lead_in`` of it), so that a
+fold between two grid points or below the grid is seen, and once more just
+above every grid amplitude (relative step ``1e-6``): an amplitude is held when
+its level exceeds every level on the refined grid below it and still rises there.
+Masked entries hold the neutral value 0 in every value channel: never NaN, and
+never a value a consumer could mistake for a backbone (a frequency of 0 Hz).
+
+Measured curves (:func:`measured_on_grid`) are interpolated onto the grid where
+they cover it; their base-acceleration level comes from the power balance of
+each point (:func:`point_base_acceleration`). :func:`assembly_scatter` is the
+spread of such curves across assemblies, per grid amplitude: the yardstick of
+every accuracy figure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import pairwise
+
+import numpy as np
+
+from identification.analytical.harmonic import backbone
+from identification.measurements.backbone import Backbone, BackboneSet
+from identification.model import JointModel
+from surrogates.runtime import REPRESENTATION_CHANNELS
+
+__all__ = [
+    "GRID_CHANNELS",
+    "MASK_REASONS",
+    "GridEvaluation",
+    "assembly_scatter",
+    "grid_backbones",
+    "measured_on_grid",
+    "point_base_acceleration",
+]
+
+#: Channels of an amplitude-grid backbone, in the order :func:`grid_backbones` returns them.
+GRID_CHANNELS = REPRESENTATION_CHANNELS["amplitude_grid"]
+#: Relative step above a grid amplitude at which the slope of ``A(a)`` is taken.
+_NUDGE = 1e-6
+#: Why an entry is masked; code ``i + 1`` in :func:`grid_backbones`' reasons (0: a backbone).
+MASK_REASONS = ("no_solution", "no_power_input", "passed")
+
+
+@dataclass(frozen=True)
+class GridEvaluation:
+    """How to evaluate a model's backbone on the amplitude grid (what every chunk needs).
+
+    Attributes
+    ----------
+    amplitudes_m
+        The grid (m), increasing, positive.
+    method, harmonics
+        Harmonic balance: ``"single"`` or ``"multi"`` with ``harmonics``.
+    refine
+        Evaluation points per grid interval (1: the grid alone).
+    lead_in
+        The evaluation starts at ``amplitudes_m[0] / lead_in`` (≥ 1).
+    lead_in_points
+        Evaluation points below the grid.
+    """
+
+    amplitudes_m: np.ndarray
+    method: str = "single"
+    harmonics: int = 5
+    refine: int = 4
+    lead_in: float = 3.0
+    lead_in_points: int = 12
+
+    def __post_init__(self) -> None:
+        grid = np.asarray(self.amplitudes_m, dtype=float)
+        if grid.ndim != 1 or grid.size < 2 or not (grid[0] > 0 and np.all(np.diff(grid) > 0)):
+            raise ValueError(f"amplitudes_m must be positive and increasing, got {grid}")
+        if self.refine < 1 or self.lead_in < 1 or self.lead_in_points < 0:
+            raise ValueError(
+                f"need refine ≥ 1, lead_in ≥ 1, lead_in_points ≥ 0: {self.refine}, "
+                f"{self.lead_in}, {self.lead_in_points}"
+            )
+        object.__setattr__(self, "amplitudes_m", grid)
+
+    @property
+    def dense(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(amplitudes, index)``: the evaluation points and where the grid lies among them."""
+        grid = self.amplitudes_m
+        lead = (
+            np.geomspace(grid[0] / self.lead_in, grid[0], self.lead_in_points + 1)[:-1]
+            if self.lead_in > 1 and self.lead_in_points
+            else np.empty(0)
+        )
+        steps = [np.geomspace(a, b, self.refine + 1)[:-1] for a, b in pairwise(grid)]
+        dense = np.concatenate([lead, *steps, grid[-1:]])
+        index = lead.size + self.refine * np.arange(grid.size)
+        return dense, index
+
+
+def grid_backbones(
+    model: JointModel, names: list[str], parameters: np.ndarray, how: GridEvaluation
+) -> tuple[np.ndarray, np.ndarray]:
+    """Backbones of parameter sets on the amplitude grid.
+
+    Parameters
+    ----------
+    model, names
+        Template model and the names of the varied parameters.
+    parameters
+        ``(n, len(names))`` values.
+    how
+        The grid and the harmonic balance.
+
+    Returns
+    -------
+    values
+        ``(n, n_amplitudes, 4)`` channels :data:`GRID_CHANNELS`: frequency (Hz),
+        damping ratio, base acceleration (m/s²), has_backbone (0 or 1); masked
+        entries are 0 in every value channel.
+    reasons
+        ``(n, n_amplitudes)`` int8: 0 where there is a backbone, else ``1 +``
+        the index of the reason in :data:`MASK_REASONS`.
+    """
+    dense, index = how.dense
+    sets = np.atleast_2d(parameters)
+    result = backbone(
+        model, dense, parameters=sets, names=names, method=how.method, harmonics=how.harmonics
+    )
+    level = result.base_acceleration
+    frequency, damping = result.frequency_hz, result.damping_ratio
+    solved = result.converged & np.isfinite(level) & np.isfinite(frequency) & (frequency > 0)
+    powered = solved & (level > 0)
+    # Levels a test stepping up has passed: the running maximum before each point.
+    candidates = np.where(powered, level, -np.inf)
+    before = np.maximum.accumulate(candidates, axis=1)
+    before = np.concatenate([np.full((level.shape[0], 1), -np.inf), before[:, :-1]], axis=1)
+    # And the slope at each grid amplitude: a level that falls there lies past a fold
+    # (unknown where the nudged point has no backbone: not counted against it).
+    nudged = backbone(
+        model, dense[index] * (1 + _NUDGE), parameters=sets, names=names, method=how.method,
+        harmonics=how.harmonics,
+    ).base_acceleration  # fmt: skip
+    falling = np.isfinite(nudged) & (nudged <= level[:, index])
+    passed = (level[:, index] <= before[:, index]) | falling
+    reasons = np.select(
+        [~solved[:, index], ~powered[:, index], passed], [1, 2, 3], default=0
+    ).astype(np.int8)
+    exists = reasons == 0
+    values = np.stack(
+        [
+            np.where(exists, frequency[:, index], 0.0),
+            np.where(exists, damping[:, index], 0.0),
+            np.where(exists, level[:, index], 0.0),
+            exists.astype(float),
+        ],
+        axis=-1,
+    )
+    return values, reasons
+
+
+def point_base_acceleration(curve: Backbone, level_gain: float | None = None) -> np.ndarray:
+    """Base-acceleration amplitude (m/s²) of each point of a measured curve.
+
+    ``level_gain`` None: from the power balance of the point itself,
+    ``A = 2 D ω² a / cos(phase error)`` (the extraction's damping ratio,
+    :mod:`identification.measurements.backbone`), which needs no shaker
+    calibration. A number: ``excitation_level × level_gain`` (m/s² per unit of the
+    record's level, e.g. per shaker volt).
+    """
+    if level_gain is None:
+        phase = 0.0 if curve.phase_error_deg is None else np.radians(curve.phase_error_deg)
+        omega = 2 * np.pi * curve.frequency_hz
+        level = 2 * curve.damping_ratio * omega**2 * curve.amplitude_m / np.cos(phase)
+        if np.any(level <= 0):
+            raise ValueError("a point has no positive power input (damping ratio ≤ 0)")
+        return level
+    if curve.excitation_level is None:
+        raise ValueError("it has no excitation levels to scale by level_gain")
+    return curve.excitation_level * level_gain
+
+
+def measured_on_grid(
+    curve: Backbone, amplitudes_m: np.ndarray, level_gain: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """A measured curve on the amplitude grid, where it covers it.
+
+    Returns
+    -------
+    values
+        ``(n_amplitudes, 3)`` frequency (Hz), damping ratio and base acceleration
+        (m/s², :func:`point_base_acceleration`), linear in amplitude between the
+        curve's points (equal amplitudes averaged, as :attr:`Backbone.branch`);
+        0 outside the curve's range.
+    observed
+        ``(n_amplitudes,)`` True inside the curve's amplitude range.
+    """
+    amplitude, inverse = np.unique(curve.amplitude_m, return_inverse=True)
+    if amplitude.size < 2:
+        raise ValueError("it needs two distinct amplitudes")
+    counts = np.bincount(inverse)
+    points = (curve.frequency_hz, curve.damping_ratio, point_base_acceleration(curve, level_gain))
+    averaged = [np.bincount(inverse, weights=p) / counts for p in points]
+    grid = np.asarray(amplitudes_m, dtype=float)
+    observed = (grid >= amplitude[0] * (1 - 1e-12)) & (grid <= amplitude[-1] * (1 + 1e-12))
+    values = np.stack([np.interp(grid, amplitude, p) for p in averaged], axis=-1)
+    return np.where(observed[:, None], values, 0.0), observed
+
+
+def assembly_scatter(
+    curves: BackboneSet,
+    amplitudes_m: np.ndarray,
+    *,
+    level_gain: float | None = None,
+    min_curves: int = 3,
+) -> np.ndarray:
+    """Assembly-to-assembly standard deviation of measured curves per grid amplitude.
+
+    ``(n_amplitudes, 3)`` for frequency (Hz), damping ratio and base acceleration
+    (m/s²), the sample standard deviation over the curves that cover each
+    amplitude; NaN where fewer than ``min_curves`` do. Curves that cannot be put
+    on the grid (fewer than two amplitudes, no positive power input) are left out.
+    """
+    if min_curves < 2:
+        raise ValueError(f"min_curves must be ≥ 2 for a standard deviation, got {min_curves}")
+    stacked, covered = [], []
+    for curve in curves:
+        try:
+            values, observed = measured_on_grid(curve, amplitudes_m, level_gain)
+        except ValueError:
+            continue
+        stacked.append(np.where(observed[:, None], values, np.nan))
+        covered.append(observed)
+    if not stacked:
+        return np.full((len(amplitudes_m), 3), np.nan)
+    stacked = np.array(stacked)
+    enough = np.sum(covered, axis=0) >= min_curves
+    scatter = np.full(stacked.shape[1:], np.nan)
+    scatter[enough] = np.nanstd(stacked[:, enough], axis=0, ddof=1)
+    return scatter
