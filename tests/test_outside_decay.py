@@ -86,11 +86,6 @@ def test_backbone_within_half_a_percent_of_the_model_free_reference(
         assert table["mean_offset_mm"].isna().all()
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="default-library identification on a decay needs the sindy-robust branch (issue #16 "
-    "item 6): amplitude-weighted cross-validation and multi-harmonic admissibility",
-)
 def test_default_library_model_within_one_percent(decay, reference, tmp_path):
     amplitude, frequency = reference
     model_path = tmp_path / "model.json"

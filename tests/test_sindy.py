@@ -206,11 +206,6 @@ def test_quadratic_stiffness_and_velocity_squared_cannot_be_told_apart(truth_dat
         )
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="sindy-robust regression, open: with the weighted rows and predictive padding BIC "
-    "keeps a spurious x·ẋ² (0.02 % peak share) on these noisy sweeps; main finds the truth",
-)
 def test_bic_finds_the_same_model(truth_data):
     # BIC takes the residual for noise (2·bandwidth·duration independent samples); on
     # noise-free data the residual is preprocessing error alone, which small spurious terms

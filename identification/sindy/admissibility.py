@@ -3,7 +3,8 @@
 Two checks, both physical, neither about the regression error:
 
 * **Backbone** (:func:`admissible`): a resonance test measures positive damping
-  at every level (the shaker feeds power in), and a free decay decays; a model
+  at every level (the shaker feeds power in), at levels that rise with the
+  amplitude, and a free decay decays; a model
   without damping, or whose damping turns negative inside the tested range,
   contradicts the records however small its regression error, and a
   phase-locked loop cannot run it there. A model with even terms (``x²``,
@@ -49,17 +50,27 @@ def backbone_method(model: JointModel) -> str:
     return "single" if all(CATALOGUE[e].parity == "odd" for e in model.effects) else "multi"
 
 
-def admissible(model: JointModel, amplitudes_m: ArrayLike, method: str | None = None) -> bool:
+def admissible(
+    model: JointModel,
+    amplitudes_m: ArrayLike,
+    method: str | None = None,
+    increasing_excitation: bool = False,
+) -> bool:
     """Whether ``model`` has a phase-resonant backbone with positive damping at every amplitude.
 
     ``method`` is that of :func:`identification.analytical.harmonic.backbone`;
     by default :func:`backbone_method`. A balance that does not converge at an
-    amplitude counts as no backbone there.
+    amplitude counts as no backbone there. With ``increasing_excitation`` the
+    base acceleration the backbone needs must also increase with the amplitude
+    (see :class:`Admissibility`).
     """
     if not model.terms:
         return False
     result = harmonic.backbone(model, amplitudes_m, method=method or backbone_method(model))
-    return bool(np.all(result.converged) and np.all(result.damping_ratio > 0))
+    ok = np.all(result.converged) and np.all(result.damping_ratio > 0)
+    if increasing_excitation:
+        ok = ok and np.all(np.diff(result.base_acceleration) > 0)
+    return bool(ok)
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,10 +144,21 @@ class Admissibility:
         Amplitudes over which the backbone must exist with positive damping.
     segments
         Stretches of the records to simulate (:func:`record_segments`).
+    driven
+        Whether the records are driven (a base acceleration or force): then the
+        excitation the backbone needs must increase with the amplitude over
+        ``amplitudes_m``. A driven test held its amplitudes at rising levels; a model
+        whose phase-resonant excitation falls with the amplitude would have jumped
+        there (a PLL cannot hold it), and no level maps onto its amplitudes for the
+        surrogate's labels and the updating. On the ``trc-like`` rig the
+        amplitude-weighted selection otherwise kept a friction mix (Coulomb against
+        Stribeck) whose damping ratio halved between 0.05 and 0.1 mm, where the
+        records measured it constant. A free decay needs no excitation: not checked.
     """
 
     amplitudes_m: np.ndarray
     segments: list[Segment]
+    driven: bool = False
     _verdicts: dict[tuple, str] = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -148,7 +170,8 @@ class Admissibility:
     ) -> Admissibility:
         """The checks of records ``kins`` with displacement offsets ``offsets``."""
         segments = [s for k, o in zip(kins, offsets, strict=True) for s in record_segments(k, o)]
-        return cls(np.asarray(amplitudes_m, dtype=float), segments)
+        driven = any(np.any(k.base_acceleration[k.valid] != 0) for k in kins)
+        return cls(np.asarray(amplitudes_m, dtype=float), segments, driven)
 
     def reason(self, model: JointModel) -> str:
         """Why ``model`` is not admissible ("" if it is)."""
@@ -162,10 +185,11 @@ class Admissibility:
         return not self.reason(model)
 
     def _judge(self, model: JointModel) -> str:
-        if not admissible(model, self.amplitudes_m):
-            return (f"no backbone with positive damping over {1e3 * self.amplitudes_m[0]:.3g}–"
-                    f"{1e3 * self.amplitudes_m[-1]:.3g} mm ({backbone_method(model)}-harmonic "
-                    "balance)")  # fmt: skip
+        if not admissible(model, self.amplitudes_m, increasing_excitation=self.driven):
+            need = ", needing an excitation that increases with the amplitude," if self.driven else ""
+            return (f"no backbone with positive damping{need} over "
+                    f"{1e3 * self.amplitudes_m[0]:.3g}–{1e3 * self.amplitudes_m[-1]:.3g} mm "
+                    f"({backbone_method(model)}-harmonic balance)")  # fmt: skip
         for segment in self.segments:
             if diverges(model, segment):
                 return (f"diverges when started from the record's state at "

@@ -50,6 +50,7 @@ from identification.effects import CATALOGUE
 from identification.measurements.signals import Kinematics, kinematics
 from identification.sindy.admissibility import Admissibility, tested_amplitudes
 from identification.sindy.design import Design, build_design
+from identification.sindy.kinematics import sensor_kinematics
 from identification.sindy.library import (
     POLYNOMIAL_LIBRARY,
     Columns,
@@ -72,7 +73,19 @@ class BetterSupportWarning(UserWarning):
 
 
 def record_kinematics(record: Any, **options: Any) -> Kinematics:
-    """Band-limited kinematics of a :class:`~identification.measurements.records.Record`."""
+    """Band-limited kinematics of a record (:class:`~identification.measurements.records.Record`
+    or :class:`~identification.measurements.columns.ColumnRecord`).
+
+    A free decay (``record.test == "free-decay"``) goes through
+    :func:`.kinematics.sensor_kinematics` on the quantity as measured: filters padded by
+    prediction (it starts in motion), the band from its own spectrum, and a measured
+    displacement's slow mean kept (``Kinematics.mean_offset``). Driven records go
+    through the velocity chain of the paper
+    (:func:`~identification.measurements.signals.kinematics`). ``options`` are
+    ``n_harmonics``, ``edge_periods`` and ``band_hz``.
+    """
+    if getattr(record, "test", "phase-resonance") == "free-decay":
+        return sensor_kinematics(record.time_s, record.response, record.quantity, **options)
     return kinematics(record.time_s, record.response_velocity, record.excitation_velocity,
                       record.frequency_hz, record.sampling_rate_hz, **options)  # fmt: skip
 
@@ -86,6 +99,17 @@ def identify(records: Any, effects: Sequence[str], **options: Any) -> Identifica
     records = [records] if hasattr(records, "response_velocity") else list(records)
     if not records:
         raise ValueError("no records given")
+    if any(getattr(r, "test", None) == "free-decay" for r in records):
+        preprocessing = {k: options.pop(k) for k in ("n_harmonics", "edge_periods", "band_hz")
+                         if k in options}  # fmt: skip
+        labels = [str(r.path or r.name) for r in records]
+        kins = []
+        for record, label in zip(records, labels, strict=True):
+            try:
+                kins.append(record_kinematics(record, **preprocessing))
+            except ValueError as exc:
+                raise ValueError(f"{label}: {exc}") from None
+        return identify_kinematics(kins, effects, labels=labels, **options)
     return identify_arrays(
         [r.time_s for r in records],
         [r.response_velocity for r in records],

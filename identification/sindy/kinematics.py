@@ -63,6 +63,7 @@ def sensor_kinematics(
     order: int = DEFAULT_ORDER,
     tolerance: float = DEFAULT_TOLERANCE,
     edge_periods: float = DEFAULT_EDGE_PERIODS,
+    band_hz: tuple[float, float] | None = None,
 ) -> Kinematics:
     """Band-limited kinematics of one record from a displacement, velocity or acceleration.
 
@@ -86,6 +87,8 @@ def sensor_kinematics(
         Pass band (:func:`~identification.measurements.signals.harmonic_band_hz`).
     edge_periods
         Periods of the band's lower edge left out at each end (see :data:`DEFAULT_EDGE_PERIODS`).
+    band_hz
+        The pass band (Hz) when given (the CLI's ``--band``); else from ``frequency_hz``.
 
     Returns
     -------
@@ -105,11 +108,16 @@ def sensor_kinematics(
         raise ValueError("t must be 1-D with at least 3 samples")
     response = _finite("response", response, t.shape)
     rate = (t.size - 1) / (t[-1] - t[0])
-    if frequency_hz is None:
-        frequency_hz = frequency_range_hz(response, rate, quantity)
-    band = harmonic_band_hz(_finite("frequency_hz", np.atleast_1d(frequency_hz),
-                                    np.atleast_1d(frequency_hz).shape),
-                            rate, n_harmonics, order=order, tolerance=tolerance)  # fmt: skip
+    if band_hz is not None:
+        band = (float(band_hz[0]), float(band_hz[1]))
+        if not 0 < band[0] < band[1] < rate / 2:
+            raise ValueError(f"band_hz={band_hz} must satisfy 0 < low < high < Nyquist")
+    else:
+        if frequency_hz is None:
+            frequency_hz = frequency_range_hz(response, rate, quantity)
+        band = harmonic_band_hz(_finite("frequency_hz", np.atleast_1d(frequency_hz),
+                                        np.atleast_1d(frequency_hz).shape),
+                                rate, n_harmonics, order=order, tolerance=tolerance)  # fmt: skip
     edge = int(np.ceil(edge_periods * rate / band[0]))
     if t.size <= 4 * edge:
         raise ValueError(

@@ -24,6 +24,8 @@ zero either way.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy import signal
@@ -75,7 +77,7 @@ def bandpass(
     order: int = DEFAULT_ORDER,
 ) -> np.ndarray:
     """Zero-phase Butterworth band-pass along the last axis, padded by prediction."""
-    sos = signal.butter(order, band_hz, btype="bandpass", fs=sampling_rate_hz, output="sos")
+    sos = _butter(order, (float(band_hz[0]), float(band_hz[1])), "bandpass", sampling_rate_hz).copy()
     return zero_phase(values, sos, sampling_rate_hz, band_hz[0])
 
 
@@ -83,8 +85,18 @@ def lowpass(
     values: ArrayLike, sampling_rate_hz: float, cutoff_hz: float, order: int = DEFAULT_ORDER
 ) -> np.ndarray:
     """Zero-phase Butterworth low-pass along the last axis, padded by prediction."""
-    sos = signal.butter(order, cutoff_hz, btype="lowpass", fs=sampling_rate_hz, output="sos")
+    sos = _butter(order, float(cutoff_hz), "lowpass", sampling_rate_hz).copy()
     return zero_phase(values, sos, sampling_rate_hz, cutoff_hz)
+
+
+@functools.lru_cache(maxsize=64)
+def _butter(
+    order: int, edges_hz: float | tuple[float, float], btype: str, sampling_rate_hz: float
+) -> np.ndarray:
+    """The Butterworth design (second-order sections): the same few filters are asked for
+    once per library column, and designing one takes as long as filtering a column (copied
+    by the callers: scipy's filters want a writable array)."""
+    return signal.butter(order, edges_hz, btype=btype, fs=float(sampling_rate_hz), output="sos")
 
 
 def _predict(segment: np.ndarray, n: int) -> np.ndarray:

@@ -284,7 +284,8 @@ def _candidates(
     """Threshold pairs and distinct supports of the candidates (see module notes).
 
     Along the threshold paths of the library and of its polynomial columns,
-    then along the backward elimination of the whole library (thresholds NaN).
+    then along the backward elimination of the whole library (thresholds NaN),
+    each of its supports thresholded at ``min_threshold``.
     """
     polynomial = np.array([CATALOGUE[t.effect].polynomial for t in terms])
     libraries = [np.ones(len(terms), dtype=bool)]
@@ -299,7 +300,13 @@ def _candidates(
             support = np.zeros(len(terms), dtype=bool)
             support[columns] = sc | sd
             seen.setdefault(support.tobytes(), (np.array([tc, td]), support))
+    floor = np.full(len(terms), min_threshold)
     for support in backward_path(design):
+        # Below the lowest threshold a term is kept by no path: the elimination's supports
+        # are thresholded there too. Kept, such a term competes on a fit of what the noise
+        # is not (on noise-free sweeps an x·ẋ² of 0.02 % share fits preprocessing error,
+        # and BIC, which takes the whole residual for noise, kept it).
+        support = stlsq(factor, floor, support) != 0
         seen.setdefault(support.tobytes(), (np.full(2, np.nan), support))
     pairs = np.array([pair for pair, _ in seen.values()])
     return pairs, [support for _, support in seen.values()]

@@ -162,10 +162,13 @@ def scan_shapes(
         points = [dict(zip(grid, values, strict=True))
                   for values in itertools.product(*grid.values())]  # fmt: skip
         held_out, se, condition, novelty = np.full((4, len(points)), np.nan)
-        for i, point in enumerate(points):
-            column = LibraryTerm(term.effect, {**term.shape, **point})
-            rows = [feature_rows(k, [column], o)[0] for k, o in zip(kins, offsets, strict=True)]
-            grams = augmented_fold_grams(design, weighted, rows)
+        # Every grid column of the effect in one band-pass per record (one filter design,
+        # one 2-D zero-phase pass): the scan's cost is the filtering of its columns.
+        columns = [LibraryTerm(term.effect, {**term.shape, **point}) for point in points]
+        grid_rows = [feature_rows(k, columns, o) for k, o in zip(kins, offsets, strict=True)]
+        candidates = augmented_fold_grams(design, weighted, grid_rows)
+        for i in range(len(points)):
+            grams = list(candidates[i])
             correlation, condition[i] = column_correlation(sum(grams))
             novelty[i] = _novelty(correlation)
             if condition[i] > SCAN_CONDITION or novelty[i] < MIN_NOVELTY:
@@ -202,32 +205,37 @@ def _novelty(correlation: np.ndarray) -> float:
 
 
 def augmented_fold_grams(
-    design: Design, weighted: Sequence[np.ndarray], column: Sequence[np.ndarray]
-) -> list[np.ndarray]:
-    """The design's fold Grams with one more column, inserted before the target.
+    design: Design, weighted: Sequence[np.ndarray], columns: Sequence[np.ndarray]
+) -> np.ndarray:
+    """The design's fold Grams with one more column, inserted before the target, per candidate.
 
     ``weighted`` are the design's weighted, scaled rows (:meth:`.Design.weighted_rows`);
-    ``column`` is the new column per record (valid samples, unscaled, unweighted); it is
-    weighted like the rows and divided by its peak.
+    ``columns`` are per record ``(n_candidates, n_valid)`` candidate columns (valid samples,
+    unscaled, unweighted); each is weighted like the rows and divided by its peak. Returns
+    ``(n_candidates, n_folds, n + 1, n + 1)``: one augmented design per candidate, the
+    products of all candidates with the rows taken in one matrix product per fold and record.
     """
-    peak = max(float(np.max(np.abs(c))) for c in column)
-    scaled = [c * w / peak for c, w in zip(column, design.weights, strict=True)]
+    peak = np.max([np.max(np.abs(c), axis=1) for c in columns], axis=0)
     n = design.fold_grams[0].shape[0]
-    grams = []
-    for g in design.fold_grams:
-        augmented = np.zeros((n + 1, n + 1))
-        augmented[: n - 1, : n - 1] = g[:-1, :-1]
-        augmented[: n - 1, -1] = augmented[-1, : n - 1] = g[:-1, -1]
-        augmented[-1, -1] = g[-1, -1]
-        grams.append(augmented)
-    for block in design.blocks:
-        part = slice(block.start, block.stop)
-        c = scaled[block.record][part]
-        cross = weighted[block.record][:, part] @ c
-        g = grams[block.fold]
-        g[n - 1, n - 1] += c @ c
-        g[: n - 1, n - 1] += cross[:-1]
-        g[n - 1, : n - 1] += cross[:-1]
-        g[n - 1, -1] += cross[-1]
-        g[-1, n - 1] += cross[-1]
+    grams = np.zeros((peak.size, len(design.fold_grams), n + 1, n + 1))
+    for k, g in enumerate(design.fold_grams):
+        grams[:, k, : n - 1, : n - 1] = g[:-1, :-1]
+        grams[:, k, : n - 1, -1] = grams[:, k, -1, : n - 1] = g[:-1, -1]
+        grams[:, k, -1, -1] = g[-1, -1]
+    for record, (rows, column, w) in enumerate(zip(weighted, columns, design.weights,
+                                                   strict=True)):  # fmt: skip
+        fold = np.full(rows.shape[1], -1)
+        for block in design.blocks:
+            if block.record == record:
+                fold[block.start : block.stop] = block.fold
+        scaled = column * w / peak[:, None]
+        for k in range(len(design.fold_grams)):
+            held = fold == k
+            c = scaled[:, held]
+            cross = c @ rows[:, held].T  # (n_candidates, n): products with Θ's columns and y
+            grams[:, k, n - 1, n - 1] += np.einsum("pi,pi->p", c, c)
+            grams[:, k, : n - 1, n - 1] += cross[:, :-1]
+            grams[:, k, n - 1, : n - 1] += cross[:, :-1]
+            grams[:, k, n - 1, -1] += cross[:, -1]
+            grams[:, k, -1, n - 1] += cross[:, -1]
     return grams
