@@ -16,6 +16,7 @@ collinearity), :mod:`.regression` (thresholded least squares on Gram matrices),
 from identification.sindy.admissibility import admissible
 from identification.sindy.identify import (
     BetterSupportWarning,
+    DriveFrequencyWarning,
     identify,
     identify_arrays,
     identify_kinematics,
@@ -51,6 +52,7 @@ __all__ = [
     "POLYNOMIAL_LIBRARY",
     "BetterSupportWarning",
     "CollinearityWarning",
+    "DriveFrequencyWarning",
     "ErrorStatistics",
     "Identification",
     "LibraryTerm",

@@ -186,7 +186,7 @@ class Admissibility:
 
     def _judge(self, model: JointModel) -> str:
         if not admissible(model, self.amplitudes_m, increasing_excitation=self.driven):
-            need = ", needing an excitation that increases with the amplitude," if self.driven else ""
+            need = ", needing an excitation rising with the amplitude," if self.driven else ""
             return (f"no backbone with positive damping{need} over "
                     f"{1e3 * self.amplitudes_m[0]:.3g}–{1e3 * self.amplitudes_m[-1]:.3g} mm "
                     f"({backbone_method(model)}-harmonic balance)")  # fmt: skip

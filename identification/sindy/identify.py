@@ -72,6 +72,18 @@ class BetterSupportWarning(UserWarning):
     """Another support of the library has a clearly better held-out error than the model's."""
 
 
+class DriveFrequencyWarning(UserWarning):
+    """The records hold one excitation frequency and the model's linear frequency is it."""
+
+
+#: Relative spread of the frequency channels (over all records) below which they hold one
+#: frequency: a PLL's frequency moves with the amplitude by far more.
+SINGLE_FREQUENCY_SPREAD = 1e-3
+#: Relative distance of the model's linear frequency from that one frequency within which it
+#: is taken for the drive's.
+DRIVE_FREQUENCY_MATCH = 1e-2
+
+
 def record_kinematics(record: Any, **options: Any) -> Kinematics:
     """Band-limited kinematics of a record (:class:`~identification.measurements.records.Record`
     or :class:`~identification.measurements.columns.ColumnRecord`).
@@ -168,6 +180,11 @@ def identify_arrays(
         Unknown effect or shape, records with different sampling rates or
         non-uniform sampling, records too short, or a rank-deficient library
         (naming the dependent columns).
+
+    Warns
+    -----
+    DriveFrequencyWarning
+        The records hold one frequency and the model's linear frequency is it.
     """
     channels = [_as_list(c) for c in (t, response_velocity, base_velocity, frequency_hz)]
     n_records = len(channels[0])
@@ -193,7 +210,42 @@ def identify_arrays(
                                    edge_periods=edge_periods, band_hz=band_hz))  # fmt: skip
         except ValueError as exc:
             raise ValueError(f"{label}: {exc}") from None
-    return identify_kinematics(kins, effects, labels=labels, **options)
+    result = identify_kinematics(kins, effects, labels=labels, **options)
+    _warn_drive_frequency(result, [np.broadcast_to(np.asarray(f, dtype=float), k.t.shape)[k.valid]
+                                   for f, k in zip(channels[3], kins, strict=True)])  # fmt: skip
+    return result
+
+
+def _warn_drive_frequency(result: Identification, frequency_hz: Sequence[np.ndarray]) -> None:
+    """:class:`DriveFrequencyWarning` when the records hold one frequency and the model's
+    linear frequency is that frequency.
+
+    At one frequency ``ω`` the band-limited response has ``ẍ = −ω² x``: inertia and
+    linear stiffness act through the same column, so a fit of steady holds gives
+    ``ω`` as the "natural" frequency whatever the structure (a shaker test of a bolted
+    beam at one frequency came out with R² = 0.9999). Only records at several
+    frequencies, a free decay or a phase-resonance test measure it.
+    """
+    values = np.concatenate(frequency_hz)
+    if values.size == 0:
+        return
+    drive = float(np.median(values))
+    if np.ptp(values) > SINGLE_FREQUENCY_SPREAD * drive:
+        return
+    model = result.model
+    if model.linear_stiffness <= 0:
+        return
+    linear = model.linear_frequency_hz
+    if abs(linear / drive - 1) <= DRIVE_FREQUENCY_MATCH:
+        warnings.warn(
+            f"the records hold one excitation frequency ({drive:.6g} Hz) and the model's "
+            f"linear frequency ({linear:.6g} Hz) is that frequency: at one frequency inertia "
+            "and linear stiffness cannot be told apart, so the natural frequency is not "
+            "measured; identify from a free decay, a phase-resonance test or several "
+            "frequencies",
+            DriveFrequencyWarning,
+            stacklevel=3,
+        )
 
 
 def identify_kinematics(

@@ -77,7 +77,8 @@ def bandpass(
     order: int = DEFAULT_ORDER,
 ) -> np.ndarray:
     """Zero-phase Butterworth band-pass along the last axis, padded by prediction."""
-    sos = _butter(order, (float(band_hz[0]), float(band_hz[1])), "bandpass", sampling_rate_hz).copy()
+    edges = (float(band_hz[0]), float(band_hz[1]))
+    sos = _butter(order, edges, "bandpass", sampling_rate_hz).copy()
     return zero_phase(values, sos, sampling_rate_hz, band_hz[0])
 
 
