@@ -73,7 +73,7 @@ class BetterSupportWarning(UserWarning):
 
 
 class DriveFrequencyWarning(UserWarning):
-    """The records hold one excitation frequency and the model's linear frequency is it."""
+    """Records without an excitation hold one frequency and the model's linear frequency is it."""
 
 
 #: Relative spread of the frequency channels (over all records) below which they hold one
@@ -184,7 +184,8 @@ def identify_arrays(
     Warns
     -----
     DriveFrequencyWarning
-        The records hold one frequency and the model's linear frequency is it.
+        Records without an excitation hold one frequency and the model's linear
+        frequency is it.
     """
     channels = [_as_list(c) for c in (t, response_velocity, base_velocity, frequency_hz)]
     n_records = len(channels[0])
@@ -211,20 +212,23 @@ def identify_arrays(
         except ValueError as exc:
             raise ValueError(f"{label}: {exc}") from None
     result = identify_kinematics(kins, effects, labels=labels, **options)
-    _warn_drive_frequency(result, [np.broadcast_to(np.asarray(f, dtype=float), k.t.shape)[k.valid]
-                                   for f, k in zip(channels[3], kins, strict=True)])  # fmt: skip
+    if not any(np.any(k.base_acceleration[k.valid]) for k in kins):
+        held = [np.broadcast_to(np.asarray(f, dtype=float), k.t.shape)[k.valid]
+                for f, k in zip(channels[3], kins, strict=True)]  # fmt: skip
+        _warn_drive_frequency(result, held)
     return result
 
 
 def _warn_drive_frequency(result: Identification, frequency_hz: Sequence[np.ndarray]) -> None:
-    """:class:`DriveFrequencyWarning` when the records hold one frequency and the model's
-    linear frequency is that frequency.
+    """:class:`DriveFrequencyWarning` when records without an excitation hold one frequency
+    and the model's linear frequency is that frequency.
 
-    At one frequency ``ω`` the band-limited response has ``ẍ = −ω² x``: inertia and
-    linear stiffness act through the same column, so a fit of steady holds gives
-    ``ω`` as the "natural" frequency whatever the structure (a shaker test of a bolted
-    beam at one frequency came out with R² = 0.9999). Only records at several
-    frequencies, a free decay or a phase-resonance test measure it.
+    At one frequency ``ω`` the band-limited response has ``ẍ = −ω² x``. With the
+    excitation measured the target ``ẍ + a_base`` still pins the inertia; without it
+    (a shaker whose force was not recorded) inertia and linear stiffness act through
+    the same column, so a fit of steady holds gives ``ω`` as the "natural" frequency
+    whatever the structure (a shaker test of a bolted beam at one frequency came out
+    with R² = 0.9999).
     """
     values = np.concatenate(frequency_hz)
     if values.size == 0:
@@ -238,11 +242,11 @@ def _warn_drive_frequency(result: Identification, frequency_hz: Sequence[np.ndar
     linear = model.linear_frequency_hz
     if abs(linear / drive - 1) <= DRIVE_FREQUENCY_MATCH:
         warnings.warn(
-            f"the records hold one excitation frequency ({drive:.6g} Hz) and the model's "
-            f"linear frequency ({linear:.6g} Hz) is that frequency: at one frequency inertia "
-            "and linear stiffness cannot be told apart, so the natural frequency is not "
-            "measured; identify from a free decay, a phase-resonance test or several "
-            "frequencies",
+            f"the records hold one excitation frequency ({drive:.6g} Hz) and carry no "
+            f"excitation, and the model's linear frequency ({linear:.6g} Hz) is that "
+            "frequency: at one frequency and without the excitation inertia and linear "
+            "stiffness cannot be told apart, so the natural frequency is not measured; "
+            "give the excitation channel, or identify from a free decay",
             DriveFrequencyWarning,
             stacklevel=3,
         )
