@@ -468,7 +468,7 @@ class Criticism:
         names, draws = self.posterior
         samples = predict_channels(
             self.model, self.data.amplitude_m, self.data.channels, method=self.base.method,
-            parameters=draws, names=names,
+            parameters=draws, names=names, excitation_harmonics=self.data.excitation_harmonics,
         )  # fmt: skip
         tables = mean_prediction(self.data, samples).reshape(len(draws), -1)[:, metric.keep]
         ok = np.isfinite(tables).all(axis=1)
@@ -477,6 +477,29 @@ class Criticism:
             # The draws spread like the population; its mean curve is known to 1/n of that.
             spread = spread / self.data.n_curves
         return Metric(metric.keep, metric.weights, metric.covariance.widened(np.atleast_2d(spread)))
+
+    def predict_at(
+        self,
+        model: JointModel,
+        amplitude_m: ArrayLike,
+        channels: Sequence[str] | None = None,
+        *,
+        method: str | None = None,
+        parameters: ArrayLike | None = None,
+        names: Sequence[str] | None = None,
+    ) -> np.ndarray:
+        """A model's prediction at amplitudes other than the points (the levels, a plotting
+        grid), driven as the points are: by the excitation the holds measured there
+        (:meth:`~identification.fitting.data.FitData.excitation_at`), not by a pure sine.
+
+        ``channels`` default to the data's, ``method`` to the refitted base model's;
+        ``parameters``/``names`` as :func:`~identification.fitting.prediction.predict_channels`.
+        """
+        return predict_channels(
+            model, amplitude_m, self.data.channels if channels is None else channels,
+            method=method or self.base.method, parameters=parameters, names=names,
+            excitation_harmonics=self.data.excitation_at(amplitude_m),
+        )  # fmt: skip
 
     # ------------------------------------------------------------ the statistics
     @cached_property
@@ -545,10 +568,9 @@ class Criticism:
         band = None
         if self.posterior is not None:
             names, draws = self.posterior
-            samples = predict_channels(
-                self.model, data.levels_m, data.channels, method=self.base.method,
-                parameters=draws, names=names,
-            )  # fmt: skip
+            samples = self.predict_at(
+                self.model, data.levels_m, method=self.base.method, parameters=draws, names=names
+            )
             band = np.nanquantile(samples, [0.025, 0.975], axis=0)
             curves = data.curves_at_levels
         for j, channel in enumerate(data.channels):
@@ -743,8 +765,8 @@ class Criticism:
         else:
             status = "not explained by the catalogue"
         # The effect's own contribution (the rest of the refitted model kept) for the words.
-        alone = predict_channels(fit.model.without(effect), levels, channels, method=fit.method)
-        own_points = predict_channels(fit.model, levels, channels, method=fit.method) - alone
+        alone = self.predict_at(fit.model.without(effect), levels, method=fit.method)
+        own_points = self.predict_at(fit.model, levels, method=fit.method) - alone
         own = own_points if np.isfinite(alone).all() else ext - without
         return Candidate(
             effect=effect,
@@ -864,7 +886,7 @@ class Criticism:
                 se[:, j] = self._standard_error[:, data.column(channel)]
 
         def predict(c: Candidate, amplitudes: np.ndarray) -> np.ndarray:
-            return predict_channels(c.fit.model, amplitudes, channels, method="multi")
+            return self.predict_at(c.fit.model, amplitudes, channels, method="multi")
 
         inside = np.abs(predict(first, data.levels_m) - predict(other, data.levels_m)) / se
         edges = np.vstack([np.repeat(se[:1], 3, axis=0), np.repeat(se[-1:], 3, axis=0)])

@@ -86,7 +86,7 @@ def base_jacobian(
     model: JointModel, free: Sequence[str], data: FitData, method: str, metric: Metric
 ) -> np.ndarray:
     """``(p, k)`` derivative of the mean prediction by each free parameter (shape
-    parameters by their logarithm)."""
+    parameters by their logarithm), each point driven by its measured excitation."""
     values = np.array([model.parameters[n] for n in free])
     is_log = np.array(["." in n for n in free])
     scale = fit_scale(model, data)
@@ -103,8 +103,9 @@ def base_jacobian(
     trial = values + np.diag(move)
     rows = np.vstack([values, trial])
     predicted = predict_channels(
-        model, data.amplitude_m, data.channels, method=method, parameters=rows, names=list(free)
-    )
+        model, data.amplitude_m, data.channels, method=method, parameters=rows, names=list(free),
+        excitation_harmonics=data.excitation_harmonics,
+    )  # fmt: skip
     tables = mean_prediction(data, predicted)
     return _flat(metric, (tables[1:] - tables[0]) / step[:, None, None])
 
@@ -130,7 +131,8 @@ def candidate_directions(
 
     Each column is the difference of the model with and without the probe, both
     through the harmonic balance the extended model needs (an even term needs the
-    multi-harmonic one). Columns whose change is below :data:`SILENT` standard errors
+    multi-harmonic one) and both driven by the excitation each point's hold measured
+    (as the fit's predictions are). Columns whose change is below :data:`SILENT` standard errors
     are returned as zeros: the effect has no first-order signature on these data (so
     are those of shapes where the harmonic balance has no solution at some point).
     """
@@ -143,19 +145,20 @@ def candidate_directions(
         probe = _probe_coefficient(effect, model, data)
         extended = model.with_effect(effect, probe, **shapes[0])
         how = resolve_method(method if method == "multi" else "auto", extended, data)
+        forcing = {"method": how, "excitation_harmonics": data.excitation_harmonics}
         with_probe = (
             predict_channels(
                 extended,
                 data.amplitude_m,
                 data.channels,
-                method=how,
                 parameters=np.array([list(s.values()) for s in shapes]),
                 names=[f"{effect}.{name}" for name in grid],
+                **forcing,
             )
             if grid
-            else predict_channels(extended, data.amplitude_m, data.channels, method=how)[None]
+            else predict_channels(extended, data.amplitude_m, data.channels, **forcing)[None]
         )
-        without = predict_channels(model, data.amplitude_m, data.channels, method=how)
+        without = predict_channels(model, data.amplitude_m, data.channels, **forcing)
         change = _flat(metric, mean_prediction(data, with_probe - without[None]) / probe)
         # A shape where the harmonic balance fails somewhere gives no direction at all.
         failed = ~np.isfinite(change).all(axis=0)
