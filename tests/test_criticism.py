@@ -20,6 +20,7 @@ from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
 from identification.rig import (
     HIDDEN_EFFECT_SCENARIOS,
+    LAB_HIDDEN_SCENARIOS,
     LAB_NULL_SCENARIOS,
     LAB_OUT_OF_CATALOGUE_SCENARIOS,
 )
@@ -142,6 +143,36 @@ def test_damping_effects_are_found_and_read(effect, coefficient, words):
         assert stribeck.fit.damping_rmse < 0.1 * crit.base.damping_rmse
         with pytest.raises(ValueError, match="no shape parameter"):
             crit.add("stribeck_friction", x_s=1.0)
+
+
+def test_stribeck_friction_is_probed_where_it_acts():
+    """Stribeck friction that vanishes within the test (v_s = 0.1 m/s: Coulomb-like at
+    0.05 mm, gone above 0.3 mm), on backbones that carry their 2nd and 3rd harmonics (so
+    every direction goes through the multi-harmonic balance). A probe sized at the
+    effect's default decay velocity and the largest amplitude is 1e11 times too strong
+    where the term acts, the balance has no solution there and the effect would have no
+    direction at all; each shape's probe is sized where that shape acts, and Stribeck's
+    law is found first, beyond Coulomb's."""
+    truth = linear(stribeck_friction={"coefficient": 0.3, "v_s": 0.1})
+    rng = np.random.default_rng(3)
+    curves = []
+    for i in range(3):
+        model = truth.replace(linear_stiffness=K0 * np.exp(0.005 * rng.standard_normal()))
+        hb = harmonic_backbone(model, AMPS, method="multi", harmonics=5)
+        ratios = (hb.harmonics_cos_m[:, 2:4] - 1j * hb.harmonics_sin_m[:, 2:4]) / AMPS[:, None]
+        noise = 1e-5 * (rng.standard_normal(ratios.shape) + 1j * rng.standard_normal(ratios.shape))
+        curve = measured_curve(hb, rng, 0.003, 2e-6, f"assembly{i}")
+        curves.append(
+            dataclasses.replace(
+                curve, harmonics=ratios + noise, harmonic_standard_error=np.full(ratios.shape, 1e-5)
+            )
+        )
+    candidates = ["coulomb_friction", "stribeck_friction", "quadratic_damping"]
+    crit = criticize(linear(), BackboneSet(curves), n_bootstrap=500, candidates=candidates)
+    assert crit.base.method == "multi"
+    stribeck = next(c for c in crit.candidates if c.effect == "stribeck_friction")
+    assert stribeck.significant and stribeck.gain > crit.effect_gains["coulomb_friction"][0]
+    assert crit.missing()[0].effect == "stribeck_friction", crit.summary()
 
 
 def test_effects_the_data_cannot_separate_form_a_group():
@@ -329,8 +360,8 @@ def test_posterior_band_covers_its_population():
 
 
 @cache
-def study(scenario: str, seed: int = 0):
-    return criticism_study(scenario, seed, assemblies=3, levels=8)
+def study(scenario: str, seed: int = 0, start: str = "base"):
+    return criticism_study(scenario, seed, start=start, assemblies=3, levels=8)
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS)
@@ -377,6 +408,21 @@ def test_quadratic_stiffness_needs_the_records():
 @pytest.mark.parametrize("scenario", SCENARIOS)
 def test_hidden_effect_study_over_seeds(scenario, seed):
     result = study(scenario, seed)
+    assert result.passed, result.row()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize("start", ["linear", "sindy"])
+@pytest.mark.parametrize("scenario", LAB_HIDDEN_SCENARIOS)
+def test_lab_hidden_effect_from_what_users_start_from(scenario, start, seed):
+    """The issue's acceptance: each catalogue effect hidden in a lab-like campaign (3
+    assemblies, 8 levels, distortion, ripple, drift, dropouts) is found from a bare
+    linear-viscous start and from SINDy's polynomial model: ranked first, or in a
+    flagged group that holds it, with only the truth's effects added before, and the
+    key channel's error down by 80 % once it is added (or already in the start, and
+    then nothing significant is left)."""
+    result = study(scenario, seed, start)
     assert result.passed, result.row()
 
 

@@ -371,6 +371,8 @@ class Criticism:
         Steps of the loop so far, this model last.
     previous_rounds
         The earlier rounds' reports (:meth:`round_report`), first first.
+    executor
+        Where the candidates' refits run (see :func:`criticize`); None: here.
     """
 
     def __init__(
@@ -391,6 +393,7 @@ class Criticism:
         rounds: Sequence[Mapping[str, Any]] = (),
         action: str | None = None,
         prefitted: Mapping[str, FitResult] | None = None,
+        executor: Any = None,
     ) -> None:
         if criterion not in ("aic", "bic"):
             raise ValueError(f"criterion must be 'aic' or 'bic', got {criterion!r}")
@@ -411,6 +414,7 @@ class Criticism:
         self.candidate_effects = _candidate_list(model, candidates)
         self.previous_rounds = [dict(r) for r in rounds]
         self._prefitted = dict(prefitted or {})
+        self.executor = executor
         self.fit = evaluate(
             model, data, method=method, weights=weights, n_parameters=len(default_free(model))
         )
@@ -671,26 +675,48 @@ class Criticism:
         return (fires["catalogue"] or fires["reference"]) and fires["where"]
 
     # ---------------------------------------------------------------- missing
+    def _extension(self, effect: str, **shape: float) -> tuple[JointModel, dict[str, Any]]:
+        """The refitted base model with ``effect`` added (coefficient 0 marks it as new:
+        :func:`fit_backbones` scans its start) and the options of its refit."""
+        if effect in self.model:
+            raise ValueError(
+                f"effect {effect!r} is already in the model ({', '.join(self.model.effects)})"
+            )
+        method = self._method_for(self.model.with_effect(effect, 0.0, **shape))
+        extended = self._base_fit(method).model.with_effect(effect, 0.0, **shape)
+        scan = {f"{effect}.{k}": [v] for k, v in shape.items()}
+        scan = {k: v for k, v in scan.items() if k in extended.parameter_names}
+        return extended, {
+            "method": method,
+            "weights": self.weights or None,
+            "shape_scan": scan or None,
+        }
+
     def _extended_fit(self, effect: str, **shape: float) -> FitResult:
         key = f"add:{effect}"
         if shape or key not in self._prefitted:
-            if effect in self.model:
-                raise ValueError(
-                    f"effect {effect!r} is already in the model ({', '.join(self.model.effects)})"
-                )
-            # Coefficient 0 marks the effect as new: fit_backbones scans its start.
-            method = self._method_for(self.model.with_effect(effect, 0.0, **shape))
-            extended = self._base_fit(method).model.with_effect(effect, 0.0, **shape)
-            scan = {f"{effect}.{k}": [v] for k, v in shape.items()}
-            scan = {k: v for k, v in scan.items() if k in extended.parameter_names}
-            result = fit_backbones(
-                extended, self.data, method=method, weights=self.weights or None,
-                shape_scan=scan or None,
-            )  # fmt: skip
+            extended, options = self._extension(effect, **shape)
+            result = fit_backbones(extended, self.data, **options)
             if shape:
                 return result
             self._prefitted[key] = result
         return self._prefitted[key]
+
+    def _refit_on_executor(self) -> None:
+        """The candidates' refits, each a task on :attr:`executor` (anything with
+        ``submit(fn, *args, **kwargs)``: a dask ``Client``, a ``concurrent.futures``
+        pool). Each refit is the serial one, started from the same refitted base model, so
+        the criticism does not depend on where it ran."""
+        todo = [e for e in self._to_refit if f"add:{e}" not in self._prefitted]
+        if self.executor is None or len(todo) < 2:
+            return
+        jobs = {e: self._extension(e) for e in todo}  # the base fits, here, once per method
+        futures = {
+            e: self.executor.submit(fit_backbones, extended, self.data, **options)
+            for e, (extended, options) in jobs.items()
+        }
+        for effect, future in futures.items():
+            self._prefitted[f"add:{effect}"] = future.result()
 
     def _flat_residual(self, fit: FitResult) -> np.ndarray:
         metric = self.metric
@@ -799,6 +825,7 @@ class Criticism:
         separate from the best one, fewest new parameters first), then the other refitted
         ones by their ``χ²`` gain — those that would do but that the data separate from the
         best are "not preferred" — then the rest by their linearised gain."""
+        self._refit_on_executor()
         tried = [self._candidate(e) for e in self.candidate_effects]
         refitted = sorted((c for c in tried if c.fit is not None), key=lambda c: -c.delta_chi2)
         proposable = [c for c in refitted if c.proposed]
@@ -1033,6 +1060,7 @@ class Criticism:
             rounds=self.rounds,
             action=f"+ {effect}",
             prefitted={f"base:{fit.method}": fit},
+            executor=self.executor,
         )
 
     # ------------------------------------------------------------------- text
@@ -1329,6 +1357,7 @@ def criticize(
     weights: Mapping[str, float] | None = None,
     noise_floor: Mapping[str, float] | None = None,
     n_periods: int = 70,
+    executor: Any = None,
 ) -> Criticism:
     """Compare a model with measured backbones, decide whether something is missing, rank
     what the catalogue offers, and say when it does not explain the data.
@@ -1372,6 +1401,10 @@ def criticize(
         See :func:`identification.fitting.least_squares.fit_backbones`.
     n_periods
         Periods per hold used for the backbone points of ``records``.
+    executor
+        Where the candidates' nonlinear refits run, each a task: anything with
+        ``submit(fn, *args, **kwargs)`` (a dask ``Client``, a ``concurrent.futures``
+        executor); None: here, one after the other. The result does not depend on it.
 
     Raises
     ------
@@ -1402,7 +1435,7 @@ def criticize(
     return Criticism(
         model, data, method=method, weights=weights, candidates=candidates, criterion=criterion,
         alpha=alpha, n_bootstrap=n_bootstrap, seed=seed, posterior=draws,
-        posterior_kind=posterior_kind, history=steps,
+        posterior_kind=posterior_kind, history=steps, executor=executor,
     )  # fmt: skip
 
 
