@@ -73,6 +73,7 @@ from identification.criticism.reference import FreeForm, explained_share, fit_re
 from identification.effects import CATALOGUE, get_effect
 from identification.fitting.data import (
     BACKBONE_CHANNELS,
+    FAILED_RESIDUAL,
     HARMONIC_ORDERS,
     FitData,
     Metric,
@@ -517,9 +518,15 @@ class Criticism:
             base.model, self.candidate_effects, self.data, base.method, metric
         )
         reference, channels = reference_directions(self.data, metric)
+        # Where the refitted model has no periodic solution the likelihood counts the miss
+        # as FAILED_RESIDUAL standard errors (said in words by the summary), and a step of
+        # a parameter there gives no direction.
+        residual = self.data.mean_residual(base.predicted)
+        failed = ~np.isfinite(residual) & self.data.used
+        residual = np.where(failed, FAILED_RESIDUAL * self._standard_error, residual)
         return cal.Problem.build(
-            self.data, metric, self.data.mean_residual(base.predicted), jacobian,
-            columns, directions, reference, channels,
+            self.data, metric, residual, np.nan_to_num(jacobian, nan=0.0, posinf=0.0,
+            neginf=0.0), columns, directions, reference, channels,
         )  # fmt: skip
 
     @cached_property
@@ -625,7 +632,8 @@ class Criticism:
         for channel in BACKBONE_CHANNELS:
             j = self.data.column(channel)
             residual, _ = self.residual(channel)
-            significant = np.abs(np.nan_to_num(z[:, j])) > bound
+            # levels with no periodic solution are said in words (the summary's own line)
+            significant = (np.abs(np.nan_to_num(z[:, j])) > bound) & np.isfinite(residual)
             for start, stop in _runs(np.sign(residual) * significant, 1):
                 worst = start + int(np.argmax(np.abs(z[start:stop, j])))
                 ranges.append(
@@ -646,7 +654,7 @@ class Criticism:
                                       for p in ("cos", "sin")))  # fmt: skip
                 predicted = np.hypot(*(self.comparison[f"harmonic{order}_{p}"]["predicted"]
                                        for p in ("cos", "sin")))  # fmt: skip
-                for start, stop in _runs((parts > bound).astype(float), 1):
+                for start, stop in _runs(((parts > bound) & np.isfinite(miss)).astype(float), 1):
                     worst = start + int(np.argmax(parts[start:stop]))
                     ranges.append(
                         FailureRange(
