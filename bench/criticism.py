@@ -22,6 +22,10 @@ decision: the false-discovery rate with its Clopper–Pearson interval, per curv
 and condition, beside the baseline of textbook χ² thresholds on the same campaigns.
 Target ≤ 5 % per decision (α = 1 %), in ≤ 20 min for 200 campaigns.
 
+``--rows FILE`` (study): each row is appended to FILE as it is done, and rows already
+there (same scenario, start, seed, assemblies, levels) are reused, so a long study runs
+in pieces and the last piece prints the whole table.
+
 Run: ``.venv/bin/python bench/criticism.py``, ``… --study --seeds 5`` or
 ``… --fdr 200``. Prints tables, then one JSON line.
 """
@@ -132,15 +136,34 @@ def _rate(name: str, k: int, n: int) -> dict:
     return {"count": k, "runs": n, "ci95_low": low, "ci95_high": high}
 
 
-def study(scenarios, seeds: int, starts, assemblies: int, levels: int) -> dict:
+def _done_rows(path: Path | None, assemblies: int, levels: int) -> dict[tuple, dict]:
+    """Rows a study already wrote to ``path`` (one JSON line each), by (scenario, start, seed)."""
+    if path is None or not path.exists():
+        return {}
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    return {
+        (r["scenario"], r["start"], r["seed"]): r
+        for r in rows
+        if (r.get("assemblies"), r.get("levels")) == (assemblies, levels)
+    }
+
+
+def study(scenarios, seeds: int, starts, assemblies: int, levels: int, rows_file=None) -> dict:
+    done = _done_rows(rows_file, assemblies, levels)
     rows = []
     for scenario in scenarios:
         for start in starts:
             for seed in range(seeds):
-                result = criticism_study(
-                    scenario, seed, start=start, assemblies=assemblies, levels=levels
-                )
-                rows.append(result.row())
+                row = done.get((scenario, start, seed))
+                if row is None:
+                    result = criticism_study(
+                        scenario, seed, start=start, assemblies=assemblies, levels=levels
+                    )
+                    row = result.row() | {"assemblies": assemblies, "levels": levels}
+                    if rows_file is not None:
+                        with rows_file.open("a") as out:
+                            out.write(json.dumps(row, default=str) + "\n")
+                rows.append(row)
                 print(rows_table(rows[-1:], STUDY_COLUMNS).splitlines()[-1], flush=True)
     print(rows_table(rows, STUDY_COLUMNS))
     null = [r for r in rows if r["kind"] == "null"]
@@ -164,6 +187,9 @@ def study(scenarios, seeds: int, starts, assemblies: int, levels: int) -> dict:
         "starts": list(starts),
         "assemblies": assemblies,
         "levels": levels,
+        "rows_reused": sum(
+            key in done for key in ((r["scenario"], r["start"], r["seed"]) for r in rows)
+        ),
         **figures,
         "passed": sum(r["passed"] for r in rows),
         "runs": len(rows),
@@ -247,13 +273,19 @@ def main() -> None:
     parser.add_argument("--assemblies", type=int, default=3, help="assemblies per run (study)")
     parser.add_argument("--records", type=int, default=5, help="records in the bench campaign")
     parser.add_argument("--levels", type=int, help="levels per record (8 study, 10 bench)")
+    parser.add_argument(
+        "--rows",
+        type=Path,
+        help="study: append each row to this JSON-lines "
+        "file and reuse the rows already there (a long study in pieces)",
+    )
     args = parser.parse_args()
     if args.fdr:
         figures = fdr(args.fdr, args.seed, args.alpha, not args.no_floors)
     elif args.study:
         scenarios = args.scenarios.split(",") if args.scenarios else STUDY_SCENARIOS
         figures = study(scenarios, args.seeds, args.starts.split(","), args.assemblies,
-                        args.levels or 8)  # fmt: skip
+                        args.levels or 8, args.rows)  # fmt: skip
     else:
         figures = bench(args.records, args.levels or 10, hold_s=2.5)
     print(json.dumps(figures, default=str))
