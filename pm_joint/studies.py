@@ -739,9 +739,8 @@ def population_coverage(
     prior, ``μ ~ N(0, location_scale)`` and ``σ ~ HalfNormal(population_scale)``
     per parameter, then ``n_curves`` assemblies ``θ_i = θ0·exp(μ + σ z_i)``,
     measured by the PLL simulator at ``excitation_levels`` with noise
-    (:func:`pll_campaign`); every curve is interpolated at ``amplitudes_m``
-    (which all curves must reach; campaigns then share one compiled model)
-    and the hierarchical model, with the same priors, is sampled. A calibrated
+    (:func:`pll_campaign`); every curve is interpolated at those of
+    ``amplitudes_m`` it reached, and the hierarchical model, with the same priors, is sampled. A calibrated
     model holds the truth in its central ``prob`` intervals of ``log_mean``
     and ``log_spread`` in about ``prob`` of the campaigns
     (:meth:`Coverage.bounds` gives the two-sided binomial region). The data
