@@ -253,6 +253,7 @@ def _cmd_update(args: argparse.Namespace) -> int:
         resume=args.resume,
     )  # fmt: skip
     print(f"wrote {args.out}")
+    print(f"sampler: {idata.attrs['sampler']} ({idata.attrs['sampler_reason']})")
     if args.report:
         posterior_report(workspace, args.report)
         print(f"wrote {args.report}/report.json")

@@ -26,7 +26,7 @@ from pytensor.gradient import pullback
 from pm_joint.forward.base import BACKBONE_COLUMNS, BackboneOp
 from surrogates.runtime import MASK_CHANNEL, SurrogateRuntime
 
-__all__ = ["SurrogateOp", "surrogate_channel_graph", "surrogate_graph"]
+__all__ = ["SurrogateGraph", "SurrogateOp", "surrogate_channel_graph", "surrogate_graph"]
 
 
 class SurrogateOp(BackboneOp):
@@ -110,6 +110,45 @@ class SurrogateOp(BackboneOp):
 
     def __repr__(self) -> str:
         return f"SurrogateOp({self.runtime!r}, names={list(self.parameter_names)})"
+
+
+class SurrogateGraph:
+    """The surrogate's network as a native pytensor graph, with the forward-model interface.
+
+    Not a pytensor ``Op`` (as :class:`~pm_joint.forward.harmonic.HarmonicBalanceGraph`):
+    calling it builds :func:`surrogate_graph`, so a gradient sampler compiles
+    the network with the rest of the model (nutpie's numba backend, PyMC's
+    NUTS) instead of calling onnxruntime through a Python Op once per
+    evaluation. Values equal :class:`SurrogateOp`'s up to onnxruntime's float32
+    rounding. There is no box check: the caller's priors keep θ inside the
+    training box (:func:`~pm_joint.inference.build_model` checks its bounds
+    against it).
+
+    Parameters
+    ----------
+    runtime, names
+        As :class:`SurrogateOp`, which :attr:`op` is (the onnxruntime twin, for
+        values outside a graph).
+    """
+
+    def __init__(self, runtime: SurrogateRuntime | str | os.PathLike, names=None) -> None:
+        self.op = SurrogateOp(runtime, names)
+        self.runtime = self.op.runtime
+        self.parameter_names = self.op.parameter_names
+        self.n_points = self.op.n_points
+        self.levels = self.op.levels
+        self.amplitudes_m = self.op.amplitudes_m
+
+    def __call__(self, theta: Any) -> pt.TensorVariable:
+        theta = pt.as_tensor_variable(theta)
+        return surrogate_graph(self.runtime, theta[..., self.op._order])
+
+    def has_backbone(self, theta: Any) -> pt.TensorVariable:
+        """As :meth:`SurrogateOp.has_backbone` (already a native graph)."""
+        return self.op.has_backbone(theta)
+
+    def __repr__(self) -> str:
+        return f"SurrogateGraph({self.runtime!r}, names={list(self.parameter_names)})"
 
 
 # The ONNX surrogate rebuilt in pytensor from its initializers.

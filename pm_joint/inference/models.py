@@ -86,6 +86,7 @@ def build_model(
     family: str = "copula",
     density: BackboneDensity | None = None,
     n_grid: int = 41,
+    native_graph: bool = False,
 ) -> pm.Model:
     """The paper's updating model as a ``pm.Model``.
 
@@ -116,6 +117,11 @@ def build_model(
     n_grid
         Number of amplitude (harmonic) or excitation (PLL) points of the
         forward model's backbone.
+    native_graph
+        The surrogate's network as a native pytensor graph
+        (:class:`~pm_joint.forward.SurrogateGraph`) rather than an onnxruntime
+        Op: what gradient samplers (nutpie, NUTS) need to compile the model
+        whole. The harmonic balance is native already; the PLL has none.
 
     Raises
     ------
@@ -129,6 +135,8 @@ def build_model(
     """
     if forward not in FORWARD_KINDS:
         raise ValueError(f"forward must be one of {FORWARD_KINDS}, got {forward!r}")
+    if native_graph and forward == "pll":
+        raise ValueError("the PLL simulator has no native pytensor graph (native_graph=True)")
     if density is None:
         levels = amplitude_levels(measured) if amplitudes_m is None else amplitudes_m
         density = BackboneDensity.fit(measured, levels, channels=channels, family=family)
@@ -142,7 +150,7 @@ def build_model(
             runtime = SurrogateRuntime.load(surrogate)
         names = list(names or runtime.parameter_names)
         bounds = _surrogate_bounds(runtime, names, bounds)
-        op = forward_model("surrogate", model, names, surrogate=runtime)
+        op = forward_model("surrogate", model, names, surrogate=runtime, native_graph=native_graph)
     else:
         if model is None:
             raise ValueError(f"forward model {forward!r} needs a JointModel")

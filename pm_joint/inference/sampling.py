@@ -24,10 +24,19 @@ from pm_joint.inference.steps import CovarianceMetropolis
 from pm_joint.inference.storage import attach_density, load_posterior
 from pm_joint.inference.traces import DrawWriter, start_trace
 
-__all__ = ["POPULATION_MODELS", "SAMPLERS", "SAMPLER_DEFAULTS", "continue_sampling", "sample"]
+__all__ = [
+    "GRADIENT_SAMPLERS",
+    "POPULATION_MODELS",
+    "SAMPLERS",
+    "SAMPLER_DEFAULTS",
+    "continue_sampling",
+    "sample",
+]
 
 #: The samplers by name.
 SAMPLERS = ("metropolis", "demetropolisz", "nuts", "nutpie")
+#: The samplers that need the gradient (a forward model that is a native pytensor graph).
+GRADIENT_SAMPLERS = ("nuts", "nutpie")
 #: The population models of ``pm-joint update --population``.
 POPULATION_MODELS = ("matching", "hierarchical")
 #: Sampler, draws and tuning steps per chain by (population model, forward model).
