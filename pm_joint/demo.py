@@ -28,21 +28,22 @@ class DemoSize:
     sindy_records: int
     surrogate_curves: int
     surrogate_epochs: int | None
-    draws: int
-    tune: int
+    draws: int | None
+    tune: int | None
     chains: int
     hierarchical_draws: int
     criticism_rounds: int
 
 
 #: ``full`` is the paper's campaign: 25 measured backbones, 500 training curves; the
-#: paper's Metropolis, its proposal covariance learned while tuning (one logp per draw,
-#: where the paper's coordinate-wise steps take one per parameter), two chains of
-#: 30 000 on the two cores; the hierarchical model with nutpie, two chains of 1 000.
+#: population matching with the default sampler of the surrogate and its draws
+#: (``draws=None``: :data:`~pm_joint.inference.SAMPLER_DEFAULTS`, whose reason the
+#: report prints), two chains on the two cores; the hierarchical model with nutpie, two
+#: chains of 1 000.
 SIZES = {
     "full": DemoSize(
         assemblies=25, n_levels=10, sindy_records=3, surrogate_curves=500, surrogate_epochs=None,
-        draws=30_000, tune=5_000, chains=2, hierarchical_draws=1_000, criticism_rounds=2,
+        draws=None, tune=None, chains=2, hierarchical_draws=1_000, criticism_rounds=2,
     ),
     "small": DemoSize(
         assemblies=4, n_levels=10, sindy_records=3, surrogate_curves=60, surrogate_epochs=15,
@@ -189,15 +190,16 @@ def run_demo(
 
     stages.run(
         "stochastic updating", pipeline.update_backbones, workspace, out / "posterior.nc",
-        forward="surrogate", sampler="metropolis", draws=cfg.draws, tune=cfg.tune,
-        chains=cfg.chains,
+        forward="surrogate", draws=cfg.draws, tune=cfg.tune, chains=cfg.chains,
     )  # fmt: skip
     content = stages.run(
         "posterior report", pipeline.posterior_report, workspace, out / "posterior"
     )
     stages.sections += posterior_sections(content, out / "posterior", out)
     verdicts = {"population matching": content["convergence"]}
-    print(f"[pm-joint demo] population matching: {content['convergence']['headline']}")
+    sampler = content["sampler"]
+    print(f"[pm-joint demo] population matching: sampler {sampler['sampler']} "
+          f"({sampler['reason']}); {content['convergence']['headline']}")  # fmt: skip
 
     # The criticism below is handed the hierarchical posterior: the draws of its population's
     # median assembly spread like the uncertainty of the population-mean curve, where the

@@ -13,12 +13,14 @@ rather than a NaN there.
 from __future__ import annotations
 
 import os
+import weakref
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import onnx
+import pytensor
 import pytensor.tensor as pt
 from onnx import numpy_helper
 from pytensor.gradient import pullback
@@ -214,6 +216,7 @@ def _network_graph(runtime: SurrogateRuntime, theta: pt.TensorVariable) -> pt.Te
     values: dict[str, Any] = {
         init.name: numpy_helper.to_array(init) for init in proto.graph.initializer
     }
+    values.update(_shared_weights(runtime, values))
     (graph_input,) = [i.name for i in proto.graph.input if i.name not in values]
     values[graph_input] = theta.reshape((-1, runtime.spec.n_params))
     for node in proto.graph.node:
@@ -228,6 +231,30 @@ def _network_graph(runtime: SurrogateRuntime, theta: pt.TensorVariable) -> pt.Te
         outputs = translate(inputs, attributes)
         values.update(zip(node.output, outputs, strict=True))
     return pt.as_tensor_variable(values[proto.graph.output[0].name]).astype("float64")
+
+
+#: The network's weights as shared variables, one set per runtime (see _shared_weights).
+_WEIGHTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _shared_weights(runtime: SurrogateRuntime, initializers: dict) -> dict[str, Any]:
+    """The floating-point initializers as float64 shared variables, cached per runtime.
+
+    Shared, not constants: a compiled function then takes the weights as inputs
+    instead of embedding tens of thousands of numbers in its code (numba, as
+    nutpie uses it, compiles such constants very slowly). Cached: the value and
+    mask graphs of one runtime use the same variables, so pytensor merges the
+    network they both evaluate into one.
+    """
+    if runtime not in _WEIGHTS:
+        _WEIGHTS[runtime] = {
+            name: pytensor.shared(
+                value.astype(np.float64), name=f"surrogate.{name}", shape=value.shape
+            )
+            for name, value in initializers.items()
+            if np.issubdtype(value.dtype, np.floating) and value.ndim > 0
+        }
+    return _WEIGHTS[runtime]
 
 
 def _as_float64(value: Any) -> Any:
@@ -278,7 +305,7 @@ def _conv1d(inputs, attributes):
         raise ValueError("ONNX Conv: auto_pad is not supported; explicit pads only")
     (dilation,) = attributes.get("dilations", [1])
     begin, end = attributes.get("pads", [0, 0])
-    kernel = weights.shape[2]
+    kernel = weights.type.shape[2] if hasattr(weights, "type") else weights.shape[2]
     padded = pt.pad(x, ((0, 0), (0, 0), (begin, end)))
     length = x.shape[2] + begin + end - dilation * (kernel - 1)
     out = sum(
