@@ -36,14 +36,15 @@ class DemoSize:
 
 
 #: ``full`` is the paper's campaign: 25 measured backbones, 500 training curves; the
-#: population matching with the default sampler of the surrogate and its draws
-#: (``draws=None``: :data:`~pm_joint.inference.SAMPLER_DEFAULTS`, whose reason the
-#: report prints), two chains on the two cores; the hierarchical model with nutpie, two
-#: chains of 1 000.
+#: population matching with the surrogate's default sampler
+#: (:data:`~pm_joint.inference.SAMPLER_DEFAULTS`, whose reason the report prints; the
+#: paper's Metropolis, its proposal covariance learned while tuning), two chains of
+#: 30 000 on the two cores (``draws=None``: the sampler's default); the hierarchical
+#: model with nutpie, two chains of 1 000.
 SIZES = {
     "full": DemoSize(
         assemblies=25, n_levels=10, sindy_records=3, surrogate_curves=500, surrogate_epochs=None,
-        draws=None, tune=None, chains=2, hierarchical_draws=1_000, criticism_rounds=2,
+        draws=30_000, tune=5_000, chains=2, hierarchical_draws=1_000, criticism_rounds=2,
     ),
     "small": DemoSize(
         assemblies=4, n_levels=10, sindy_records=3, surrogate_curves=60, surrogate_epochs=15,
