@@ -359,22 +359,7 @@ def test_lab_drift_is_drift_not_physics():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", range(5))
-@pytest.mark.parametrize(
-    "scenario",
-    [
-        pytest.param(
-            s,
-            marks=pytest.mark.xfail(
-                reason="seed 0 measured: the free-form reference fires on the 2nd harmonic at "
-                "the lowest level (0.58 % of the fundamental): the excitation's harmonics are "
-                "not yet forcing the model (crit-measure's branch)"
-            ),
-        )
-        if s in ("lab-all", "lab-all-hardening")
-        else s
-        for s in LAB_NULL_SCENARIOS
-    ],
-)
+@pytest.mark.parametrize("scenario", LAB_NULL_SCENARIOS)
 def test_lab_null_scenarios_find_nothing(scenario, seed):
     result = study(scenario, seed)
     assert result.passed and not result.false_discovery, result.row()
