@@ -239,6 +239,7 @@ EXIT_NOT_CONVERGED = 3
 
 def _cmd_update(args: argparse.Namespace) -> int:
     from pm_joint.analysis import convergence_verdict
+    from pm_joint.inference import SAMPLER_DEFAULTS
     from pm_joint.pipeline import posterior_report, update_backbones
     from pm_joint.workspace import Workspace
 
@@ -249,13 +250,16 @@ def _cmd_update(args: argparse.Namespace) -> int:
         raise ValueError(f"--forward {forward} needs --model model.json")
     workspace = Workspace(args.dir, model=args.model, surrogate=args.surrogate,
                           **_workspace_options(args))  # fmt: skip
+    sampler = args.sampler or SAMPLER_DEFAULTS.get((args.population, forward), {}).get("sampler")
+    # nutpie keeps its draws in memory: no trace folder unless one is asked for (then refused).
+    trace = args.trace or (None if sampler == "nutpie" else Path(args.out).with_suffix(".zarr"))
     idata = update_backbones(
         workspace, args.out, population=args.population, forward=forward,
         sampler=args.sampler, draws=args.draws, tune=args.tune, chains=args.chains,
-        seed=args.seed, trace=args.trace or Path(args.out).with_suffix(".zarr"),
-        resume=args.resume,
+        seed=args.seed, trace=trace, resume=args.resume,
     )  # fmt: skip
     print(f"wrote {args.out}")
+    print(f"sampler: {idata.attrs['sampler']} ({idata.attrs['sampler_reason']})")
     if args.report:
         posterior_report(workspace, args.report)
         print(f"wrote {args.report}/report.json")
@@ -412,7 +416,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", help="also write the arviz report into this folder")
     p.add_argument(
         "--trace", help="zarr folder the draws are written to as they are taken (default: "
-        "OUT with the suffix .zarr)",
+        "OUT with the suffix .zarr; none for nutpie, which keeps its draws in memory)",
     )  # fmt: skip
     p.add_argument(
         "--resume", action="store_true",

@@ -28,17 +28,19 @@ class DemoSize:
     sindy_records: int
     surrogate_curves: int
     surrogate_epochs: int | None
-    draws: int
-    tune: int
+    draws: int | None
+    tune: int | None
     chains: int
     hierarchical_draws: int
     criticism_rounds: int
 
 
 #: ``full`` is the paper's campaign: 25 measured backbones, 500 training curves; the
-#: paper's Metropolis, its proposal covariance learned while tuning (one logp per draw,
-#: where the paper's coordinate-wise steps take one per parameter), two chains of
-#: 30 000 on the two cores; the hierarchical model with nutpie, two chains of 1 000.
+#: population matching with the surrogate's default sampler
+#: (:data:`~pm_joint.inference.SAMPLER_DEFAULTS`, whose reason the report prints; the
+#: paper's Metropolis, its proposal covariance learned while tuning), two chains of
+#: 30 000 on the two cores (``draws=None``: the sampler's default); the hierarchical
+#: model with nutpie, two chains of 1 000.
 SIZES = {
     "full": DemoSize(
         assemblies=25, n_levels=10, sindy_records=3, surrogate_curves=500, surrogate_epochs=None,
@@ -189,15 +191,16 @@ def run_demo(
 
     stages.run(
         "stochastic updating", pipeline.update_backbones, workspace, out / "posterior.nc",
-        forward="surrogate", sampler="metropolis", draws=cfg.draws, tune=cfg.tune,
-        chains=cfg.chains,
+        forward="surrogate", draws=cfg.draws, tune=cfg.tune, chains=cfg.chains,
     )  # fmt: skip
     content = stages.run(
         "posterior report", pipeline.posterior_report, workspace, out / "posterior"
     )
     stages.sections += posterior_sections(content, out / "posterior", out)
     verdicts = {"population matching": content["convergence"]}
-    print(f"[pm-joint demo] population matching: {content['convergence']['headline']}")
+    sampler = content["sampler"]
+    print(f"[pm-joint demo] population matching: sampler {sampler['sampler']} "
+          f"({sampler['reason']}); {content['convergence']['headline']}")  # fmt: skip
 
     # The criticism below is handed the hierarchical posterior: the draws of its population's
     # median assembly spread like the uncertainty of the population-mean curve, where the

@@ -146,8 +146,10 @@ def posterior_sections(
         population.get("meaning", ""),
         f"Identifiability: {check['text']}." if check else "",
         _loo_text(loo),
-        f"Sampler: {sampler.get('sampler')}, {sampler.get('draws')} draws × "
-        f"{sampler.get('chains')} chains; mean acceptance {sampler.get('acceptance_rate')}.",
+        f"Sampler: {sampler.get('sampler')}"
+        + (f" ({sampler['reason']})" if sampler.get("reason") else "")
+        + f", {sampler.get('draws')} draws × {sampler.get('chains')} chains; "
+        f"mean acceptance {sampler.get('acceptance_rate')}.",
     ]
     sections = [
         Section(

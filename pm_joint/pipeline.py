@@ -40,6 +40,7 @@ from identification.sindy import (
 from pm_joint import html, plotting
 from pm_joint.analysis import convergence_verdict, identifiability, loo, population_predictive
 from pm_joint.inference import (
+    GRADIENT_SAMPLERS,
     POPULATION_MODELS,
     SAMPLER_DEFAULTS,
     amplitudes_within_surrogate,
@@ -414,9 +415,10 @@ def update_backbones(
         if amplitudes_m is None and surrogate is not None:
             amplitudes_m = amplitudes_within_surrogate(measured, surrogate)
         density = workspace.density(amplitudes_m, channels=channels, family=family)
+        # A gradient sampler compiles the surrogate's network with the model (native graph).
         pm_model = build_model(
             workspace.model, measured, forward=forward, surrogate=surrogate, names=names,
-            density=density,
+            density=density, native_graph=sampler in GRADIENT_SAMPLERS,
         )  # fmt: skip
     if earlier_run:  # and resume
         idata = continue_sampling(pm_model, trace, draws=draws, sampler=sampler)
@@ -431,8 +433,15 @@ def update_backbones(
         _hierarchical_extras(idata, pm_model, workspace.model, names, channels, measured)
     else:
         idata.attrs["identifiability"] = json.dumps(identifiability(pm_model, idata))
-    metadata = {"forward": forward, "sampler": sampler, "surrogate": str(surrogate),
-                "population_model": pm_model.population_model}  # fmt: skip
+    reason = defaults["reason"] if sampler == defaults["sampler"] else "chosen by the caller"
+    idata.attrs["sampler_reason"] = reason
+    metadata = {
+        "forward": forward,
+        "sampler": sampler,
+        "sampler_reason": reason,
+        "surrogate": str(surrogate),
+        "population_model": pm_model.population_model,
+    }
     save_posterior(idata, out, metadata=metadata, density=density)
     workspace.posterior = idata
     return idata

@@ -321,8 +321,16 @@ def test_curves_without_a_shared_range_and_levels_outside_it_raise():
         build_model(
             DUFFING, measured, names=NAMES, bounds=BOUNDS, amplitudes_m=[low, 2 * high, 3 * high]
         )
-    with pytest.raises(ValueError, match="range all measured curves share"):
-        hierarchical_model(DUFFING, measured, NAMES, amplitudes_m=[0.5 * low, high])
+    # The hierarchical model scores the levels each curve reached, and no curve without one.
+    with pytest.raises(ValueError, match="reach none of the amplitude levels"):
+        hierarchical_model(DUFFING, measured, NAMES, amplitudes_m=[0.1 * low, 0.2 * low])
+    first = measured[0]
+    short = Backbone(first.amplitude_m[3:], first.frequency_hz[3:], first.damping_ratio[3:])
+    partial = hierarchical_model(
+        DUFFING, BackboneSet([short, *measured[1:]]), NAMES, amplitudes_m=[low, high]
+    )
+    # The short curve did not reach the lowest level: one point; the others two each.
+    assert partial["curve_index"].get_value().tolist() == [0, *np.repeat(np.arange(1, 6), 2)]
 
 
 def test_a_surrogate_must_match_the_priors(duffing_surrogate):

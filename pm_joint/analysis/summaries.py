@@ -105,7 +105,7 @@ _SAMPLER_SIGNATURES = (
 
 
 def sampler_info(idata: xr.DataTree, sampler: str | None = None) -> dict[str, Any]:
-    """Sampler name, draws, chains, tuning steps, wall time (s) and mean acceptance rate.
+    """Sampler name, why it ran, draws, chains, tuning steps, wall time (s), mean acceptance.
 
     The name is ``sampler`` if given, else a ``sampler`` attribute of the
     DataTree (or of its ``pm_joint_metadata``), else guessed from the
@@ -116,6 +116,7 @@ def sampler_info(idata: xr.DataTree, sampler: str | None = None) -> dict[str, An
     attrs = {**posterior.attrs, **stats.attrs}
     metadata = json.loads(idata.attrs.get("pm_joint_metadata", "{}"))
     sampler = sampler or idata.attrs.get("sampler") or metadata.get("sampler")
+    reason = idata.attrs.get("sampler_reason") or metadata.get("sampler_reason")
     if sampler is None:
         sampler = next((s for stat, s in _SAMPLER_SIGNATURES if stat in stats), None)
     acceptance = None
@@ -129,6 +130,7 @@ def sampler_info(idata: xr.DataTree, sampler: str | None = None) -> dict[str, An
     tuning = attrs.get("tuning_steps")
     return {
         "sampler": sampler,
+        "reason": reason,
         "draws": int(posterior.sizes["draw"]),
         "chains": int(posterior.sizes["chain"]),
         "tuning_steps": None if tuning is None else int(tuning),

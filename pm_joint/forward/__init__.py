@@ -14,6 +14,10 @@ the likelihood turns NaN into ``logp = -inf``. Each one exposes
     levels. Gradient: backpropagation through
     :func:`~pm_joint.forward.surrogate.surrogate_graph`, the same network
     rebuilt in pytensor from the ONNX initializers.
+:class:`~pm_joint.forward.surrogate.SurrogateGraph`
+    That network as a native pytensor graph (``forward_model("surrogate",
+    ..., native_graph=True)``): gradient samplers (nutpie, NUTS) compile it
+    with the rest of the model.
 :class:`~pm_joint.forward.harmonic.HarmonicBalanceGraph`
     Builds :func:`~pm_joint.forward.harmonic.harmonic_backbone_graph`, the
     single-harmonic backbone as a native pytensor graph from the catalogue's
@@ -43,7 +47,7 @@ from pm_joint.forward.harmonic import (
     harmonic_backbone_graph,
 )
 from pm_joint.forward.pll import PLLOp
-from pm_joint.forward.surrogate import SurrogateOp, surrogate_graph
+from pm_joint.forward.surrogate import SurrogateGraph, SurrogateOp, surrogate_graph
 from surrogates.runtime import SurrogateRuntime
 
 __all__ = [
@@ -51,6 +55,7 @@ __all__ = [
     "FORWARD_KINDS",
     "HarmonicBalanceGraph",
     "PLLOp",
+    "SurrogateGraph",
     "SurrogateOp",
     "describing_graph",
     "forward_model",
@@ -71,7 +76,8 @@ def forward_model(
     amplitudes_m: ArrayLike | None = None,
     levels: ArrayLike | None = None,
     config: PLLConfig | None = None,
-) -> SurrogateOp | HarmonicBalanceGraph | PLLOp:
+    native_graph: bool = False,
+) -> SurrogateOp | SurrogateGraph | HarmonicBalanceGraph | PLLOp:
     """The forward model called ``kind``, all with the same interface.
 
     Parameters
@@ -84,10 +90,13 @@ def forward_model(
         The joint model (template of the named parameters).
     names
         Order of θ; default the surrogate's or the model's parameter names.
+    native_graph
+        The surrogate as :class:`SurrogateGraph` (its network in pytensor, for
+        gradient samplers) rather than :class:`SurrogateOp` (onnxruntime).
 
     Returns
     -------
-    SurrogateOp | HarmonicBalanceGraph | PLLOp
+    SurrogateOp | SurrogateGraph | HarmonicBalanceGraph | PLLOp
         Call it on θ ``(..., n_params)`` for a ``(..., n_points, 3)`` backbone.
     """
     needs = {"surrogate": "surrogate", "harmonic": "amplitudes_m", "pll": "levels"}
@@ -96,8 +105,10 @@ def forward_model(
     given = {"surrogate": surrogate, "amplitudes_m": amplitudes_m, "levels": levels}
     if given[needs[kind]] is None:
         raise ValueError(f"forward model {kind!r} needs {needs[kind]}=")
+    if native_graph and kind == "pll":
+        raise ValueError("the PLL simulator has no native pytensor graph (native_graph=True)")
     if kind == "surrogate":
-        return SurrogateOp(surrogate, names)
+        return SurrogateGraph(surrogate, names) if native_graph else SurrogateOp(surrogate, names)
     if not isinstance(model, JointModel):
         raise ValueError(f"forward model {kind!r} needs a JointModel, got {model!r}")
     if kind == "harmonic":

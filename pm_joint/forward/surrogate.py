@@ -13,12 +13,14 @@ rather than a NaN there.
 from __future__ import annotations
 
 import os
+import weakref
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import onnx
+import pytensor
 import pytensor.tensor as pt
 from onnx import numpy_helper
 from pytensor.gradient import pullback
@@ -26,7 +28,7 @@ from pytensor.gradient import pullback
 from pm_joint.forward.base import BACKBONE_COLUMNS, BackboneOp
 from surrogates.runtime import MASK_CHANNEL, SurrogateRuntime
 
-__all__ = ["SurrogateOp", "surrogate_channel_graph", "surrogate_graph"]
+__all__ = ["SurrogateGraph", "SurrogateOp", "surrogate_channel_graph", "surrogate_graph"]
 
 
 class SurrogateOp(BackboneOp):
@@ -112,6 +114,45 @@ class SurrogateOp(BackboneOp):
         return f"SurrogateOp({self.runtime!r}, names={list(self.parameter_names)})"
 
 
+class SurrogateGraph:
+    """The surrogate's network as a native pytensor graph, with the forward-model interface.
+
+    Not a pytensor ``Op`` (as :class:`~pm_joint.forward.harmonic.HarmonicBalanceGraph`):
+    calling it builds :func:`surrogate_graph`, so a gradient sampler compiles
+    the network with the rest of the model (nutpie's numba backend, PyMC's
+    NUTS) instead of calling onnxruntime through a Python Op once per
+    evaluation. Values equal :class:`SurrogateOp`'s up to onnxruntime's float32
+    rounding. There is no box check: the caller's priors keep θ inside the
+    training box (:func:`~pm_joint.inference.build_model` checks its bounds
+    against it).
+
+    Parameters
+    ----------
+    runtime, names
+        As :class:`SurrogateOp`, which :attr:`op` is (the onnxruntime twin, for
+        values outside a graph).
+    """
+
+    def __init__(self, runtime: SurrogateRuntime | str | os.PathLike, names=None) -> None:
+        self.op = SurrogateOp(runtime, names)
+        self.runtime = self.op.runtime
+        self.parameter_names = self.op.parameter_names
+        self.n_points = self.op.n_points
+        self.levels = self.op.levels
+        self.amplitudes_m = self.op.amplitudes_m
+
+    def __call__(self, theta: Any) -> pt.TensorVariable:
+        theta = pt.as_tensor_variable(theta)
+        return surrogate_graph(self.runtime, theta[..., self.op._order])
+
+    def has_backbone(self, theta: Any) -> pt.TensorVariable:
+        """As :meth:`SurrogateOp.has_backbone` (already a native graph)."""
+        return self.op.has_backbone(theta)
+
+    def __repr__(self) -> str:
+        return f"SurrogateGraph({self.runtime!r}, names={list(self.parameter_names)})"
+
+
 # The ONNX surrogate rebuilt in pytensor from its initializers.
 
 
@@ -175,6 +216,7 @@ def _network_graph(runtime: SurrogateRuntime, theta: pt.TensorVariable) -> pt.Te
     values: dict[str, Any] = {
         init.name: numpy_helper.to_array(init) for init in proto.graph.initializer
     }
+    values.update(_shared_weights(runtime, values))
     (graph_input,) = [i.name for i in proto.graph.input if i.name not in values]
     values[graph_input] = theta.reshape((-1, runtime.spec.n_params))
     for node in proto.graph.node:
@@ -189,6 +231,30 @@ def _network_graph(runtime: SurrogateRuntime, theta: pt.TensorVariable) -> pt.Te
         outputs = translate(inputs, attributes)
         values.update(zip(node.output, outputs, strict=True))
     return pt.as_tensor_variable(values[proto.graph.output[0].name]).astype("float64")
+
+
+#: The network's weights as shared variables, one set per runtime (see _shared_weights).
+_WEIGHTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _shared_weights(runtime: SurrogateRuntime, initializers: dict) -> dict[str, Any]:
+    """The floating-point initializers as float64 shared variables, cached per runtime.
+
+    Shared, not constants: a compiled function then takes the weights as inputs
+    instead of embedding tens of thousands of numbers in its code (numba, as
+    nutpie uses it, compiles such constants very slowly). Cached: the value and
+    mask graphs of one runtime use the same variables, so pytensor merges the
+    network they both evaluate into one.
+    """
+    if runtime not in _WEIGHTS:
+        _WEIGHTS[runtime] = {
+            name: pytensor.shared(
+                value.astype(np.float64), name=f"surrogate.{name}", shape=value.shape
+            )
+            for name, value in initializers.items()
+            if np.issubdtype(value.dtype, np.floating) and value.ndim > 0
+        }
+    return _WEIGHTS[runtime]
 
 
 def _as_float64(value: Any) -> Any:
@@ -239,7 +305,7 @@ def _conv1d(inputs, attributes):
         raise ValueError("ONNX Conv: auto_pad is not supported; explicit pads only")
     (dilation,) = attributes.get("dilations", [1])
     begin, end = attributes.get("pads", [0, 0])
-    kernel = weights.shape[2]
+    kernel = weights.type.shape[2] if hasattr(weights, "type") else weights.shape[2]
     padded = pt.pad(x, ((0, 0), (0, 0), (begin, end)))
     length = x.shape[2] + begin + end - dilation * (kernel - 1)
     out = sum(

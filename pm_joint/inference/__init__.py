@@ -15,6 +15,7 @@ from pm_joint.inference.models import (
     uniform_priors,
 )
 from pm_joint.inference.sampling import (
+    GRADIENT_SAMPLERS,
     POPULATION_MODELS,
     SAMPLER_DEFAULTS,
     SAMPLERS,
@@ -30,6 +31,7 @@ from pm_joint.inference.storage import (
 )
 
 __all__ = [
+    "GRADIENT_SAMPLERS",
     "HIERARCHICAL",
     "POPULATION_MATCHING",
     "POPULATION_MODELS",

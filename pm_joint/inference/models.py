@@ -86,6 +86,7 @@ def build_model(
     family: str = "copula",
     density: BackboneDensity | None = None,
     n_grid: int = 41,
+    native_graph: bool = False,
 ) -> pm.Model:
     """The paper's updating model as a ``pm.Model``.
 
@@ -116,6 +117,11 @@ def build_model(
     n_grid
         Number of amplitude (harmonic) or excitation (PLL) points of the
         forward model's backbone.
+    native_graph
+        The surrogate's network as a native pytensor graph
+        (:class:`~pm_joint.forward.SurrogateGraph`) rather than an onnxruntime
+        Op: what gradient samplers (nutpie, NUTS) need to compile the model
+        whole. The harmonic balance is native already; the PLL has none.
 
     Raises
     ------
@@ -129,6 +135,8 @@ def build_model(
     """
     if forward not in FORWARD_KINDS:
         raise ValueError(f"forward must be one of {FORWARD_KINDS}, got {forward!r}")
+    if native_graph and forward == "pll":
+        raise ValueError("the PLL simulator has no native pytensor graph (native_graph=True)")
     if density is None:
         levels = amplitude_levels(measured) if amplitudes_m is None else amplitudes_m
         density = BackboneDensity.fit(measured, levels, channels=channels, family=family)
@@ -142,7 +150,7 @@ def build_model(
             runtime = SurrogateRuntime.load(surrogate)
         names = list(names or runtime.parameter_names)
         bounds = _surrogate_bounds(runtime, names, bounds)
-        op = forward_model("surrogate", model, names, surrogate=runtime)
+        op = forward_model("surrogate", model, names, surrogate=runtime, native_graph=native_graph)
     else:
         if model is None:
             raise ValueError(f"forward model {forward!r} needs a JointModel")
@@ -300,8 +308,10 @@ def hierarchical_model(
     names
         Parameters that vary from assembly to assembly.
     amplitudes_m
-        Amplitude levels (m) to interpolate every curve at; default (None)
-        every measured point as it is, which leaves out the interpolation error.
+        Amplitude levels (m) to interpolate every curve at, those inside its
+        own measured range (a level a curve did not reach gives it no point);
+        default (None) every measured point as it is, which leaves out the
+        interpolation error.
     location_scale, population_scale
         Scales of the priors of the log-locations (normal) and of the spreads
         (half-normal), relative, log scale.
@@ -374,8 +384,9 @@ def _curve_points(
 ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """Curve index, amplitude (m) and channel values of every point, flat.
 
-    With ``amplitudes_m`` every curve is interpolated there (inside the range all
-    curves share); without, each curve's own points are taken.
+    With ``amplitudes_m`` every curve is interpolated at the levels inside its
+    own measured range (a curve that did not reach a level has no point there,
+    as in the test); without, each curve's own points are taken.
     """
     if amplitudes_m is None:
         amplitudes = [b.amplitude_m for b in measured]
@@ -383,14 +394,13 @@ def _curve_points(
         damping = np.concatenate([b.damping_ratio for b in measured])
     else:
         levels = np.asarray(amplitudes_m, dtype=float)
-        low, high = measured.common_range()
-        if np.any((levels < low) | (levels > high)):
-            raise ValueError(
-                f"amplitude levels {levels} m must lie in the range all measured curves share "
-                f"({low:.4g}–{high:.4g} m)"
-            )
-        amplitudes = [levels] * len(measured)
-        frequency = measured.frequency_matrix(levels).ravel()
-        damping = measured.damping_matrix(levels).ravel()
+        amplitudes = [levels[(levels >= b.amplitude_m.min()) & (levels <= b.amplitude_m.max())]
+                      for b in measured]  # fmt: skip
+        empty = [b.label for b, a in zip(measured, amplitudes, strict=True) if a.size == 0]
+        if empty:
+            raise ValueError(f"curves {empty} reach none of the amplitude levels {levels} m")
+        pairs = list(zip(measured, amplitudes, strict=True))
+        frequency = np.concatenate([b.frequency_at(a) for b, a in pairs])
+        damping = np.concatenate([b.damping_at(a) for b, a in pairs])
     curve = np.concatenate([np.full(a.size, i) for i, a in enumerate(amplitudes)])
     return curve, np.concatenate(amplitudes), {"frequency_hz": frequency, "damping_ratio": damping}

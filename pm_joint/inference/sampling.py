@@ -24,25 +24,44 @@ from pm_joint.inference.steps import CovarianceMetropolis
 from pm_joint.inference.storage import attach_density, load_posterior
 from pm_joint.inference.traces import DrawWriter, start_trace
 
-__all__ = ["POPULATION_MODELS", "SAMPLERS", "SAMPLER_DEFAULTS", "continue_sampling", "sample"]
+__all__ = [
+    "GRADIENT_SAMPLERS",
+    "POPULATION_MODELS",
+    "SAMPLERS",
+    "SAMPLER_DEFAULTS",
+    "continue_sampling",
+    "sample",
+]
 
 #: The samplers by name.
 SAMPLERS = ("metropolis", "demetropolisz", "nuts", "nutpie")
+#: The samplers that need the gradient (a forward model that is a native pytensor graph).
+GRADIENT_SAMPLERS = ("nuts", "nutpie")
 #: The population models of ``pm-joint update --population``.
 POPULATION_MODELS = ("matching", "hierarchical")
-#: Sampler, draws and tuning steps per chain by (population model, forward model).
-#: Population matching keeps the paper's Metropolis (its covariance now learned while
-#: tuning) on the forward models without a pytensor gradient (the onnxruntime surrogate,
-#: the PLL simulator). On the differentiable harmonic-balance graph nutpie is the
-#: default: side by side on that posterior it reached 35.1 min-ESS/s and PyMC's NUTS 30.6
-#: (issue #17; bench/sampling.py measures every sampler there). The hierarchical model
-#: has a parameter vector per curve (over a hundred dimensions): gradient samplers only.
+#: Sampler, draws and tuning steps per chain, and why that sampler, by (population model,
+#: forward model). The reason is printed with every run (CLI, report).
 SAMPLER_DEFAULTS = {
-    ("matching", "surrogate"): {"sampler": "metropolis", "draws": 30_000, "tune": 3_000},
-    ("matching", "pll"): {"sampler": "metropolis", "draws": 30_000, "tune": 3_000},
-    ("matching", "harmonic"): {"sampler": "nutpie", "draws": 2_000, "tune": 1_000},
-    ("hierarchical", "harmonic"): {"sampler": "nutpie", "draws": 1_000, "tune": 1_000},
-}
+    ("matching", "surrogate"): {
+        "sampler": "metropolis", "draws": 30_000, "tune": 3_000,
+        "reason": "the paper's sampler, its proposal covariance learned while tuning",
+    },
+    ("matching", "pll"): {
+        "sampler": "metropolis", "draws": 30_000, "tune": 3_000,
+        "reason": "the PLL simulator has no gradient: the paper's Metropolis, its proposal "
+        "covariance learned while tuning",
+    },
+    ("matching", "harmonic"): {
+        "sampler": "nutpie", "draws": 2_000, "tune": 1_000,
+        "reason": "a differentiable graph: nutpie's NUTS, the best min-ESS/s measured there "
+        "(bench/sampling.py)",
+    },
+    ("hierarchical", "harmonic"): {
+        "sampler": "nutpie", "draws": 1_000, "tune": 1_000,
+        "reason": "a parameter vector per curve (over a hundred dimensions): gradient "
+        "samplers only, nutpie's NUTS the fastest",
+    },
+}  # fmt: skip
 
 
 def sample(
