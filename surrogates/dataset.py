@@ -79,7 +79,6 @@ __all__ = [
     "add_measured",
     "generate_dataset",
     "nominal_levels",
-    "reachable_amplitude_range",
     "record_labels",
     "sample_parameters",
 ]
@@ -437,34 +436,6 @@ def nominal_levels(
             f"increasing over {1e3 * low:g}–{1e3 * high:g} mm; pass levels explicitly"
         )
     return levels
-
-
-def reachable_amplitude_range(
-    model: JointModel, low_m: float, high_m: float
-) -> tuple[float, float]:
-    """The part of the amplitudes ``[low_m, high_m]`` a stepped excitation can hold the model at.
-
-    Excitation levels map one-to-one onto amplitudes only while the base
-    acceleration the backbone needs increases with amplitude; past its first
-    maximum a PLL test jumps, so the range ends there (multi-harmonic balance
-    on 200 geometric amplitudes).
-
-    Raises
-    ------
-    ValueError
-        When the range ends before ``1.5 × low_m``.
-    """
-    grid = np.geomspace(low_m, high_m, 200)
-    hb = backbone(model, grid, method="multi")
-    level = np.where(hb.converged, hb.base_acceleration, np.nan)
-    falling = np.flatnonzero(~(np.diff(level) > 0))
-    end = grid[falling[0]] if falling.size else high_m
-    if end <= low_m * 1.5:
-        raise ValueError(
-            f"model {model.name or model.equation()!r}: its backbone needs a base acceleration "
-            f"that does not increase over the measured {1e3 * low_m:.3g}–{1e3 * high_m:.3g} mm"
-        )
-    return low_m, float(end)
 
 
 # ---------------------------------------------------------------------------

@@ -426,6 +426,21 @@ def train_on_dataset(
             for o in dataset.origin[measured & (dataset.partition == "test")]
         ],
         "measured_excluded": dataset.provenance.get("measured", {}).get("excluded", {}),
+        # Per measured curve: its split, loss weight and label misfit (assembly SDs).
+        "measured_curves": {
+            str(o).removeprefix(MEASURED_PREFIX): {
+                "split": str(split),
+                "weight": float(weight),
+                "label_misfit": float(misfit) if math.isfinite(misfit) else None,
+            }
+            for o, split, weight, misfit in zip(
+                dataset.origin[measured],
+                dataset.partition[measured],
+                dataset.weight[measured],
+                dataset.label_misfit[measured],
+                strict=True,
+            )
+        },
     }
     surrogate.test_report = accuracy_report(dataset, surrogate.predict, scatter=scatter)
     return surrogate
