@@ -259,7 +259,8 @@ def surrogate_section(
         f"Amplitude-grid surrogate: frequency, damping ratio, base acceleration and the "
         f"has_backbone mask on {len(amplitudes)} response amplitudes"
         + (f" over {1e3 * amplitudes[0]:.3g}–{1e3 * amplitudes[-1]:.3g} mm" if amplitudes else "")
-        + f"; the paper's network ({network.get('parameters', '?')} weights)"
+        + f"; the paper's network ({network.get('parameters', {}).get('exported', '?')} "
+        "weights)"
         + (f" on the residual of a degree-{head} regression head" if head else "")
         + ", exported to ONNX and run by onnxruntime.",
         f"Curves: {counts.get('requested', 0)} analytical requested, "
@@ -325,14 +326,20 @@ def surrogate_section(
             + _ratio_text(analytical.get("to_linear"), limits.get("to_linear", 0.1))
             + "."
         )
-    tables.append(
-        (
-            "measured curves: label misfit (assembly SDs of frequency), weight and split",
-            [{"curve": k, **v} for k, v in measured_curves.items()]
-            + [{"curve": k, "split": "left out", "weight": 0.0, "label_misfit": None}
-               for k in excluded],
+    by_channel = data.get("label_misfit_by_channel", {})
+    rows = [
+        {"curve": k, "split": v["split"], "weight": v["weight"]} for k, v in measured_curves.items()
+    ] + [{"curve": k, "split": "left out", "weight": 0.0} for k in excluded]
+    for row in rows:
+        misfits = by_channel.get(row["curve"]) or {}
+        row.update({f"misfit {c}": misfits.get(c) for c in _GRID_VALUE_CHANNELS})
+    if rows:
+        text.append(
+            "Label misfit: the RMS over a measured curve's amplitudes of (its label's "
+            "backbone − the curve) in assembly standard deviations, per channel; a curve's "
+            "weight follows its frequency misfit."
         )
-    )  # fmt: skip
+    tables.append(("measured curves: split, loss weight, label misfit", rows))
     return Section(
         "Neural surrogate",
         "\n\n".join(text),

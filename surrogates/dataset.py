@@ -942,8 +942,9 @@ def add_measured(
         raise ValueError(f"level_gain must be finite and > 0, got {level_gain}")
     misfit_weight(math.nan, misfit_threshold, misfit_policy)  # checks the policy's arguments
     on_grid = spec.representation == "amplitude_grid"
+    by_channel: dict[str, dict[str, float]] = {}
     if on_grid:
-        rows = _grid_rows(dataset, curves, values, level_gain, scatter)
+        rows = _grid_rows(dataset, curves, values, level_gain, scatter, by_channel)
     else:
         columns = [_ALL_CHANNELS.index(c) for c in spec.channels]
         rows = []
@@ -993,6 +994,9 @@ def add_measured(
         record.setdefault("label_misfit", {}).update(
             {k: _json_misfit(v) for k, v in misfits.items()}
         )
+        record.setdefault("label_misfit_by_channel", {}).update(
+            {k: {c: _json_misfit(v) for c, v in m.items()} for k, m in by_channel.items()}
+        )
         record["misfit_policy"] = {"policy": misfit_policy, "threshold": misfit_threshold}
     provenance["counts"]["measured"] = len(record["added"])
     provenance.pop("splits", None)  # the new curves are in no split yet
@@ -1032,10 +1036,12 @@ def _grid_rows(
     labels: np.ndarray,
     level_gain: float | None,
     scatter: ArrayLike | None,
+    by_channel: dict[str, dict[str, float]],
 ) -> list[tuple]:
     """Per curve ``(name, label, row, observed, misfit, reason)`` on the amplitude grid.
 
-    ``reason`` is None for a usable curve, else why it is left out.
+    ``reason`` is None for a usable curve, else why it is left out; ``misfit`` is
+    the frequency's. ``by_channel`` receives every value channel's misfit per curve.
     """
     spec, provenance = dataset.spec, dataset.provenance
     grid = spec.amplitudes_m
@@ -1068,10 +1074,14 @@ def _grid_rows(
             reason = "it covers fewer than two amplitudes of the grid"
             rows.append((curve.label, label, None, None, math.nan, reason))
             continue
-        misfit = label_misfit(
-            values[:, 0], observed, label_backbone[:, frequency],
-            label_backbone[:, mask] >= 0.5, scatter[:, 0],
-        )  # fmt: skip
+        exists = label_backbone[:, mask] >= 0.5
+        by_channel[curve.label] = {
+            channel: label_misfit(
+                values[:, j], observed, label_backbone[:, j], exists, scatter[:, j]
+            )
+            for j, channel in enumerate(GRID_CHANNELS[:3])
+        }
+        misfit = by_channel[curve.label][GRID_CHANNELS[frequency]]
         row = label_backbone.copy()
         row[observed, :3] = values[observed]
         row[observed, mask] = 1.0
