@@ -5,8 +5,9 @@ the virtual TRC campaign of the ``trc-like`` rig (25 assemblies, 10 levels), its
 measured backbones, the SINDy model of the paper's library identified from 3
 records, and each record's label (its own fit of the model's terms).
 
-For each box (``demo``: ± 20 % around the model, widened to cover every label,
-as the demo's; ``wide``: ± 50 %): an amplitude-grid dataset
+For each box (``demo``: the demo's, ± ``--demo-spread`` around the model, widened to
+cover every label, :func:`pm_joint.pipeline.surrogate_box`; ``wide``: ± 50 %): an
+amplitude-grid dataset
 (:mod:`surrogates.grid`: frequency, damping ratio, base acceleration and the
 ``has_backbone`` mask on 41 amplitudes over the measured range, every parameter
 vector kept) of ``--n-curves`` analytical curves plus the 25 measured curves with
@@ -53,7 +54,7 @@ from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import BackboneSet
 from identification.model import JointModel, parameter_bounds
 from pm_joint import pipeline
-from pm_joint.demo import DEMO_LIBRARY
+from pm_joint.demo import DEMO_LIBRARY, SURROGATE_SPREAD
 from pm_joint.studies import table5_study
 from pm_joint.workspace import Workspace
 from surrogates.dataset import add_measured, generate_dataset
@@ -87,6 +88,10 @@ def parse_args() -> argparse.Namespace:
         help="split the measured curves like the analytical ones (the paper's way), labels "
         "that misfit their curves by more than the scatter left out",
     )
+    parser.add_argument(
+        "--demo-spread", type=float, default=SURROGATE_SPREAD,
+        help=f"the demo box's relative spread (default {SURROGATE_SPREAD}, the demo's)",
+    )  # fmt: skip
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads")
     parser.add_argument("--table5-sizes", default="200,300,400,500", help="empty to skip")
@@ -113,15 +118,6 @@ def demo_front(workdir: Path) -> tuple[JointModel, list[str], BackboneSet, np.nd
         seconds["demo_front_cpu_s"] = time.process_time() - start
     model = JointModel.from_json(files[0])
     return model, default_free(model), BackboneSet.from_csv(files[1]), np.load(files[2]), seconds
-
-
-def demo_box(model: JointModel, names: list[str], labels: np.ndarray) -> np.ndarray:
-    """± 20 % around the model, widened by 5 % of the span beyond every label (as the demo)."""
-    box = parameter_bounds(model, names, 0.2)
-    margin = 0.05 * (box[:, 1] - box[:, 0])
-    box[:, 0] = np.minimum(box[:, 0], labels.min(axis=0) - margin)
-    box[:, 1] = np.maximum(box[:, 1], labels.max(axis=0) + margin)
-    return box
 
 
 def call_times_ms(call, repeats: int) -> dict[str, float]:
@@ -328,7 +324,10 @@ def main() -> None:
         "assembly scatter of frequency (Hz) per amplitude: "
         f"{np.nanmin(scatter['frequency_hz']):.3g}–{np.nanmax(scatter['frequency_hz']):.3g}"
     )
-    boxes = {"demo": demo_box(model, names, labels), "wide": parameter_bounds(model, names, 0.5)}
+    boxes = {
+        "demo": pipeline.surrogate_box(model, names, labels, args.demo_spread),
+        "wide": parameter_bounds(model, names, 0.5),
+    }
     results = []
     for name in [b for b in args.boxes.split(",") if b]:
         figures = run_box(name, boxes[name], model, names, measured, labels, scatter, args, config)

@@ -58,6 +58,9 @@ SIZES = {
 
 #: The SINDy library of the demo: the paper's (every catalogue term but microslip).
 DEMO_LIBRARY = PAPER_LIBRARY
+#: The surrogate's box: ± this around the identified model, widened to cover every label
+#: (:func:`pm_joint.pipeline.surrogate_box`); the updating's prior is this box.
+SURROGATE_SPREAD = 0.2
 
 
 class _Stages:
@@ -164,7 +167,8 @@ def run_demo(
     workspace.release_records()  # about 1 GB at full size; no later stage reads them from here
     runtime = stages.run(
         "surrogate", pipeline.train_surrogate_stage, workspace, out / "surrogate",
-        labels=labels, n_curves=cfg.surrogate_curves, max_epochs=cfg.surrogate_epochs, seed=0,
+        labels=labels, n_curves=cfg.surrogate_curves, relative_spread=SURROGATE_SPREAD,
+        max_epochs=cfg.surrogate_epochs, seed=0,
     )  # fmt: skip
     stages.sections.append(surrogate_section(runtime.metadata, out / "surrogate", out))
 

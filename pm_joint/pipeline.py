@@ -67,6 +67,7 @@ __all__ = [
     "label_records",
     "posterior_report",
     "run_report",
+    "surrogate_box",
     "train_surrogate_stage",
     "update_backbones",
     "write_rig_campaign",
@@ -265,6 +266,23 @@ def label_records(workspace: Workspace, names: Sequence[str] | None = None) -> n
     return record_labels(workspace.records, model, names or default_free(model))
 
 
+def surrogate_box(
+    model: JointModel,
+    names: Sequence[str],
+    labels: np.ndarray | None = None,
+    relative_spread: float = 0.2,
+) -> np.ndarray:
+    """``(len(names), 2)`` training box: ± ``relative_spread`` around the model's values,
+    widened to cover every label (``(n, len(names))``) by 5 % of its span beyond."""
+    box = parameter_bounds(model, list(names), relative_spread)
+    if labels is not None:
+        labels = np.asarray(labels, dtype=float)
+        margin = 0.05 * (box[:, 1] - box[:, 0])
+        box[:, 0] = np.minimum(box[:, 0], labels.min(axis=0) - margin)
+        box[:, 1] = np.maximum(box[:, 1], labels.max(axis=0) + margin)
+    return box
+
+
 def train_surrogate_stage(
     workspace: Workspace,
     out: str | os.PathLike,
@@ -317,14 +335,8 @@ def train_surrogate_stage(
     out = Path(out)
     model, measured = workspace.model, workspace.backbones
     names = default_free(model)
-    box = parameter_bounds(model, names, relative_spread)
-    n_measured = 0
-    if labels is not None:
-        labels = np.asarray(labels, dtype=float)
-        margin = 0.05 * (box[:, 1] - box[:, 0])
-        box[:, 0] = np.minimum(box[:, 0], labels.min(axis=0) - margin)
-        box[:, 1] = np.maximum(box[:, 1], labels.max(axis=0) + margin)
-        n_measured = len(measured)
+    box = surrogate_box(model, names, labels, relative_spread)
+    n_measured = 0 if labels is None else len(measured)
     low = min(b.amplitude_range_m[0] for b in measured)
     high = max(b.amplitude_range_m[1] for b in measured)
     grid = np.geomspace(low, high, n_amplitudes)
