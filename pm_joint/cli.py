@@ -213,7 +213,7 @@ def _cmd_train_surrogate(args: argparse.Namespace) -> None:
         runtime = train_surrogate_stage(
             workspace, args.out, labels=label_records(workspace), n_curves=args.curves,
             n_amplitudes=args.amplitudes, max_epochs=args.epochs,
-            hold_out_measured=args.hold_out_measured, misfit_policy=args.label_misfit,
+            hold_out_measured=not args.measured_in_training, misfit_policy=args.label_misfit,
             seed=args.seed, executor=executor,
         )  # fmt: skip
     print(f"wrote {args.out}/surrogate.onnx for parameters {', '.join(runtime.parameter_names)}")
@@ -372,9 +372,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="response amplitudes of the grid over the measured range (default 41)",
     )  # fmt: skip
     p.add_argument(
-        "--hold-out-measured", action="store_true",
-        help="put every measured curve in the test split (the likelihood's curves are then "
-        "no training data)",
+        "--measured-in-training", action="store_true",
+        help="split the measured curves like the analytical ones, as the paper (default: all "
+        "in the test split, so the likelihood's curves are no training data)",
     )  # fmt: skip
     p.add_argument(
         "--label-misfit", choices=MISFIT_POLICIES, default="downweight",

@@ -60,7 +60,7 @@ SIZES = {
 DEMO_LIBRARY = PAPER_LIBRARY
 #: The surrogate's box: ± this around the identified model, widened to cover every label
 #: (:func:`pm_joint.pipeline.surrogate_box`); the updating's prior is this box.
-SURROGATE_SPREAD = 0.2
+SURROGATE_SPREAD = 0.1
 
 
 class _Stages:

@@ -287,7 +287,11 @@ def surrogate_section(
     text.append(
         f"{len(in_training)} of the likelihood's measured curves were also training or "
         "validation data of this surrogate"
-        + (" (hold them out with hold_out_measured=True)." if in_training else ".")
+        + (
+            " (hold them out with hold_out_measured=True)."
+            if in_training
+            else ": they were held out, in the test split."
+        )
     )
     tables = [
         (
@@ -320,7 +324,8 @@ def surrogate_section(
     if analytical:
         text.append(
             "Acceptance (analytical test curves, frequency): error ÷ assembly scatter at the "
-            "worst amplitude "
+            f"worst of the {analytical.get('levels_with_scatter')} of {len(amplitudes)} "
+            "amplitudes where at least 3 measured curves give a scatter "
             + _ratio_text(analytical.get("to_scatter_max"), limits.get("to_scatter_max", 0.1))
             + "; ÷ the linear baseline's "
             + _ratio_text(analytical.get("to_linear"), limits.get("to_linear", 0.1))

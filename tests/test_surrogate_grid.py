@@ -326,6 +326,7 @@ def test_the_exported_grid_surrogate_carries_its_test_figures(trained, tmp_path)
     verdict = "met" if ratios["to_linear"] <= 0.1 else "NOT MET"
     assert f"linear baseline's {ratios['to_linear']:.3g} (target ≤ 0.1: {verdict})" in section.text
     assert "0 of the likelihood's measured curves were also training" in section.text
+    assert "worst of the" in section.text  # says over how many amplitudes the scatter is known
 
 
 def test_the_likelihood_sees_the_mask_as_a_probability_not_nan(trained, tmp_path):
