@@ -276,7 +276,8 @@ def surrogate_section(
             + "; ".join(f"{k}: {v}" for k, v in excluded.items())
             + "."
         )
-    lowered = {k: v for k, v in measured_curves.items() if v["weight"] < 1}
+    # A weight acts in training only: a held-out (test) curve is scored whatever its weight.
+    lowered = {k: v for k, v in measured_curves.items() if v["weight"] < 1 and v["split"] != "test"}
     if lowered:
         text.append(
             "Down-weighted (label misfit beyond the threshold, weight (threshold/misfit)²): "
