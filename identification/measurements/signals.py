@@ -254,6 +254,10 @@ class Kinematics:
         Pass band used for all channels.
     valid
         Slice of samples away from the filter's end transients; regress on these.
+    mean_offset
+        Measured slow mean of the displacement about its equilibrium (m), which the
+        band-pass takes out of ``displacement``; None where the sensor cannot show it
+        (velocity, acceleration).
     """
 
     t: np.ndarray
@@ -264,6 +268,7 @@ class Kinematics:
     sampling_rate_hz: float
     band_hz: tuple[float, float]
     valid: slice
+    mean_offset: np.ndarray | None = None
 
     @property
     def absolute_acceleration(self) -> np.ndarray:

@@ -14,7 +14,15 @@ collinearity), :mod:`.regression` (thresholded least squares on Gram matrices),
 """
 
 from identification.sindy.admissibility import admissible
-from identification.sindy.identify import identify, identify_arrays, record_kinematics
+from identification.sindy.identify import (
+    BetterSupportWarning,
+    DriveFrequencyWarning,
+    identify,
+    identify_arrays,
+    identify_kinematics,
+    record_kinematics,
+)
+from identification.sindy.kinematics import sensor_kinematics
 from identification.sindy.library import (
     EQ3_SYMBOLS,
     GROUPS,
@@ -42,7 +50,9 @@ __all__ = [
     "GROUPS",
     "PAPER_LIBRARY",
     "POLYNOMIAL_LIBRARY",
+    "BetterSupportWarning",
     "CollinearityWarning",
+    "DriveFrequencyWarning",
     "ErrorStatistics",
     "Identification",
     "LibraryTerm",
@@ -55,8 +65,10 @@ __all__ = [
     "design_matrix",
     "identify",
     "identify_arrays",
+    "identify_kinematics",
     "mean_offset",
     "plot_validation",
     "record_kinematics",
+    "sensor_kinematics",
     "validate",
 ]

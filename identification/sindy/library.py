@@ -43,8 +43,9 @@ from typing import Any
 import numpy as np
 
 from identification.effects import CATALOGUE, get_effect
-from identification.measurements.signals import Kinematics, bandpass, lowpass
+from identification.measurements.signals import Kinematics
 from identification.model import JointModel, Term
+from identification.sindy import padding
 
 #: The paper's library: polynomials up to cubic in (x, ẋ) and its joint terms
 #: (every catalogue effect but the hysteretic ``microslip``).
@@ -76,6 +77,13 @@ EQ3_SYMBOLS: dict[str, str] = {
 GROUPS = ("conservative", "dissipative")
 #: |r| between two library columns above which a :class:`CollinearityWarning` is given.
 COLLINEARITY_WARNING = 0.99
+#: Cutoff of the slow mean's low-pass, as a fraction of the band's lower edge. The band's
+#: lower edge sits at about 0.72 of the lowest fundamental, so the order-8 low-pass
+#: attenuates the fundamental by (1/0.36)^16 ≈ 1e7; a slow mean varies with the amplitude
+#: (level ramps of 0.1 s, decay times of 0.1 s and more), far below the cutoff. A lower cutoff
+#: only lengthens the low-pass's start transient: at a quarter of the edge, the exact model's
+#: residual over a free decay's first eighth was 2.7 times that at half of it.
+SLOW_CUTOFF = 0.5
 #: Condition number of the scaled library above which it counts as rank-deficient (the
 #: Gram matrix resolves condition numbers up to about 1e8 in double precision).
 RANK_DEFICIENT = 1e7
@@ -200,14 +208,103 @@ def design_rows(
     kin: Kinematics, terms: Sequence[LibraryTerm], offset: np.ndarray | None
 ) -> np.ndarray:
     """``(n_terms + 1, n_valid)``: the columns of :func:`design_matrix` as rows, then y."""
+    rows = np.empty((len(terms) + 1, kin.valid.stop - kin.valid.start))
+    rows[:-1] = feature_rows(kin, terms, offset)
+    rows[-1] = regression_target(kin)
+    return rows
+
+
+def regression_target(kin: Kinematics) -> np.ndarray:
+    """``y = ẍ + a_base`` over the valid samples.
+
+    Not band-passed a second time: on the open-loop sweeps of ``tests/test_sindy.py``
+    a second (padded) band-pass of ``y`` raised the residual of the exact model from
+    0.034 to 0.038 m/s² and made the selection keep a spurious ``x·ẋ²``.
+    """
+    return kin.absolute_acceleration[kin.valid]
+
+
+def feature_rows(
+    kin: Kinematics, terms: Sequence[LibraryTerm], offset: np.ndarray | None
+) -> np.ndarray:
+    """``(n_terms, n_valid)``: each column along the record, band-passed, over the valid samples."""
     x = kin.displacement if offset is None else kin.displacement + offset
-    rows = np.empty((len(terms) + 1, x.size))
+    rows = np.empty((len(terms), x.size))
     for i, term in enumerate(terms):
         rows[i] = term.feature(x, kin.velocity)
     # Rows are contiguous in memory, so filtering along the last axis is the fast way.
-    rows[:-1] = bandpass(rows[:-1], kin.sampling_rate_hz, kin.band_hz, axis=-1)
-    rows[-1] = kin.absolute_acceleration
-    return rows[:, kin.valid]
+    return padding.bandpass(rows, kin.sampling_rate_hz, kin.band_hz)[:, kin.valid]
+
+
+def depends_on_displacement(term: LibraryTerm) -> bool:
+    """Whether a column changes with the displacement (so with a mean offset added to it)."""
+    x = np.linspace(-1e-3, 1e-3, 41)
+    v = 0.2 * np.cos(np.linspace(0.0, 9.0, 41))
+    return not np.array_equal(term.feature(x, v), term.feature(x + 1e-4, v))
+
+
+class Columns:
+    """Band-passed library columns of a set of records, each computed once.
+
+    Building the library is most of an identification's time (a feature and a
+    zero-phase band-pass per column and record); the reference fit, the shape
+    scan, the shape grid and the mean-offset iterations ask for the same columns
+    again. Columns that do not depend on the displacement are shared with the
+    collections made for other offsets (:meth:`with_offsets`).
+    """
+
+    def __init__(
+        self,
+        kins: Sequence[Kinematics],
+        offsets: Sequence[np.ndarray | None],
+        shared: dict[tuple, list[np.ndarray]] | None = None,
+    ) -> None:
+        self.kins = list(kins)
+        self.offsets = list(offsets)
+        self._shared = {} if shared is None else shared  # displacement-independent columns
+        self._own: dict[tuple, list[np.ndarray]] = {}
+        self._targets: dict[int, np.ndarray] = {}
+
+    def with_offsets(self, offsets: Sequence[np.ndarray | None]) -> Columns:
+        """The columns of the same records with other displacement offsets."""
+        return Columns(self.kins, offsets, self._shared)
+
+    def rows(self, terms: Sequence[LibraryTerm]) -> list[np.ndarray]:
+        """Per record, ``(n_terms + 1, n_valid)`` rows as :func:`design_rows` gives them."""
+        missing = list({_key(t): t for t in terms if self._find(t) is None}.values())
+        if missing:
+            computed = [feature_rows(k, missing, o)
+                        for k, o in zip(self.kins, self.offsets, strict=True)]  # fmt: skip
+            for i, term in enumerate(missing):
+                store = self._own if depends_on_displacement(term) else self._shared
+                store[_key(term)] = [c[i] for c in computed]
+        out = []
+        for r, kin in enumerate(self.kins):
+            rows = np.empty((len(terms) + 1, kin.valid.stop - kin.valid.start))
+            for i, term in enumerate(terms):
+                rows[i] = self._find(term)[r]
+            rows[-1] = self._target(r)
+            out.append(rows)
+        return out
+
+    def _target(self, record: int) -> np.ndarray:
+        if record not in self._targets:
+            self._targets[record] = regression_target(self.kins[record])
+        return self._targets[record]
+
+    def _find(self, term: LibraryTerm) -> list[np.ndarray] | None:
+        key = _key(term)
+        return self._own.get(key, self._shared.get(key))
+
+
+def _key(term: LibraryTerm) -> tuple:
+    return (term.effect, tuple(sorted(term.shape.items())))
+
+
+def slow_cutoff_hz(band_hz: tuple[float, float]) -> float:
+    """Cutoff (Hz) of the low-pass that takes the slow mean of a record: :data:`SLOW_CUTOFF`
+    of the band's lower edge."""
+    return SLOW_CUTOFF * band_hz[0]
 
 
 def mean_offset(model: JointModel, kin: Kinematics, iterations: int = 3) -> np.ndarray:
@@ -216,17 +313,17 @@ def mean_offset(model: JointModel, kin: Kinematics, iterations: int = 3) -> np.n
     The band-limited displacement ``x'`` has no slow part, but the true one is
     ``x' + m(t)`` with ``m`` such that the slow part of the restoring force
     vanishes: ``slow(f(x' + m, ẋ)) = 0``. Solved by the fixed point
-    ``m ← m − slow(f(x' + m, ẋ)) / k_lin``, with "slow" a low-pass at a quarter
-    of the band's lower edge (far below the fundamental).
+    ``m ← m − slow(f(x' + m, ẋ)) / k_lin``, with "slow" a low-pass at
+    :data:`SLOW_CUTOFF` of the band's lower edge (:func:`slow_cutoff_hz`).
     """
     k = model.linear_stiffness
     if k <= 0:
         raise ValueError(f"model has no positive linear stiffness (k = {k}); no offset defined")
-    cutoff = kin.band_hz[0] / 4
+    cutoff = slow_cutoff_hz(kin.band_hz)
     offset = np.zeros_like(kin.displacement)
     for _ in range(iterations):
         force = model.restoring_force(kin.displacement + offset, kin.velocity)
-        offset = offset - lowpass(force, kin.sampling_rate_hz, cutoff) / k
+        offset = offset - padding.lowpass(force, kin.sampling_rate_hz, cutoff) / k
     return offset
 
 
@@ -255,7 +352,7 @@ def column_correlation(gram: np.ndarray) -> tuple[np.ndarray, float]:
     """
     correlation = _unit_columns(gram)
     values = np.clip(np.linalg.eigvalsh(correlation), 0.0, None)
-    return correlation, float(np.sqrt(values[-1] / values[0]))
+    return correlation, float(np.sqrt(values[-1] / values[0])) if values[0] > 0 else math.inf
 
 
 def _unit_columns(gram: np.ndarray) -> np.ndarray:

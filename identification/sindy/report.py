@@ -19,6 +19,7 @@ import numpy as np
 from identification.effects import CATALOGUE
 from identification.measurements.signals import Kinematics
 from identification.model import JointModel
+from identification.sindy.admissibility import Admissibility
 from identification.sindy.library import (
     COLLINEARITY_WARNING,
     GROUPS,
@@ -28,6 +29,8 @@ from identification.sindy.library import (
     library_model,
 )
 from identification.sindy.selection import Fit, ThresholdPath
+from identification.sindy.shapes import ShapeScan
+from identification.sindy.weighting import ErrorModel
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,8 +64,16 @@ class Identification:
         Coefficient of determination of ``ẍ + a_base`` over the regression samples.
     residual_rms
         RMS of the regression residual (m/s²).
-    held_out_rms
-        RMS of the cross-validated (held-out time blocks) residual (m/s²).
+    held_out_error
+        RMS of the cross-validated (held-out blocks) residual, each sample divided by
+        the error model's standard deviation there: about 1 for a model as good as the
+        reference fit at every amplitude.
+    error_model
+        The records' error model (:class:`.weighting.ErrorModel`) the rows are weighted by.
+    shape_scans
+        The scans of the shape parameters the caller did not fix (:class:`.shapes.ShapeScan`).
+    inadmissible
+        Why the model is not admissible (:class:`.admissibility.Admissibility`), "" if it is.
     condition_number
         Of the scaled library matrix.
     correlation
@@ -90,7 +101,10 @@ class Identification:
     path: ThresholdPath | None
     r2: float
     residual_rms: float
-    held_out_rms: float
+    held_out_error: float
+    error_model: ErrorModel
+    shape_scans: tuple[ShapeScan, ...]
+    inadmissible: str
     condition_number: float
     correlation: np.ndarray
     peak_contribution: dict[str, float]
@@ -110,6 +124,10 @@ class Identification:
         iterations: int,
         threshold: float | Sequence[float] | str | None,
         ensemble: tuple[dict[str, float], dict[str, float]] | None,
+        *,
+        error_model: ErrorModel,
+        shape_scans: tuple[ShapeScan, ...],
+        admissibility: Admissibility,
     ) -> Identification:
         """The report of the selected fit, warning about nearly collinear library columns.
 
@@ -129,6 +147,10 @@ class Identification:
             The ``threshold`` argument of the identification (names the method).
         ensemble
             Inclusion probabilities and median coefficients of bagged fits, or None.
+        error_model, shape_scans
+            The records' error model and the scans of the unfixed shapes.
+        admissibility
+            The checks of the records, to state whether the model passes them.
         """
         names = [t.effect for t in terms]
         correlation, condition = column_correlation(fit.design.gram)
@@ -158,7 +180,10 @@ class Identification:
             path=fit.path,
             r2=1.0 - fit.rss / fit.design.tss,
             residual_rms=math.sqrt(fit.rss / fit.design.n_rows),
-            held_out_rms=math.sqrt(fit.held_out) * float(fit.design.scale[-1]),
+            held_out_error=math.sqrt(fit.held_out),
+            error_model=error_model,
+            shape_scans=shape_scans,
+            inadmissible=admissibility.reason(model),
             condition_number=condition,
             correlation=correlation,
             peak_contribution=_peak_contribution(model, kins, offsets),
@@ -188,7 +213,8 @@ class Identification:
             f"SINDy identification: {self.n_samples} samples, thresholds "
             f"{self.threshold[0]:.3g} (conservative) / {self.threshold[1]:.3g} (dissipative) "
             f"({self.threshold_method}), R² = {self.r2:.6f}, residual RMS "
-            f"{self.residual_rms:.4g} m/s² (held out {self.held_out_rms:.4g}), condition number "
+            f"{self.residual_rms:.4g} m/s², held-out error {self.held_out_error:.3g} "
+            f"(normalised; {self.error_model.text()}), condition number "
             f"{self.condition_number:.3g}",
             f"{'effect':<30}{'group':>13}{'coefficient':>13}{'ξ':>11}{'peak share':>12}"
             f"{'P(incl.)':>10}",
@@ -202,6 +228,10 @@ class Identification:
                 f"{'' if share is None else f'{share:.2%}':>12}"
                 f"{'' if incl is None else f'{incl:.2f}':>10}"
             )
+        for scan in self.shape_scans:
+            lines.append("shape scanned: " + scan.text())
+        if self.inadmissible:
+            lines.append(f"NOT ADMISSIBLE: the model {self.inadmissible}")
         pairs = self.collinear_pairs()
         if pairs:
             lines.append("nearly collinear columns (|r| > 0.95): " + ", ".join(
