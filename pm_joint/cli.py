@@ -235,7 +235,10 @@ def _cmd_criticize(args: argparse.Namespace) -> None:
     from pm_joint.workspace import Workspace
 
     workspace = Workspace(args.dir, **_workspace_options(args))
-    crit = criticize_campaign(workspace, args.model, args.out, rounds=args.rounds)
+    with _executor(args) as executor:
+        crit = criticize_campaign(
+            workspace, args.model, args.out, rounds=args.rounds, executor=executor
+        )
     rounds = crit.rounds
     for k, report in enumerate(rounds, start=1):
         if len(rounds) > 1:
@@ -395,6 +398,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--rounds", type=int, default=0, help="add the best proposed effect this many times"
     )
+    _add_executor_options(
+        p, "dask LocalCluster workers refitting the candidate effects (default: serial; the "
+        "report does not depend on it)",
+    )  # fmt: skip
     add_record_options(p)
     p.set_defaults(func=_cmd_criticize)
 

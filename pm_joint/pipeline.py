@@ -223,6 +223,7 @@ def criticize_campaign(
     rounds: int = 0,
     measured: BackboneSet | None = None,
     posterior=None,
+    executor: Any = None,
 ):
     """Criticize a model against a campaign; optionally add the best effect ``rounds`` times.
 
@@ -237,7 +238,9 @@ def criticize_campaign(
     (:func:`~pm_joint.analysis.posterior.posterior_samples`). Writes
     ``criticism.json`` and figures to ``out`` (for the last round, whose history
     holds every step) and returns the last
-    :class:`~identification.criticism.criticism.Criticism`.
+    :class:`~identification.criticism.criticism.Criticism`. ``executor`` (a dask
+    ``Client``, a ``concurrent.futures`` executor) runs the candidates' refits; the
+    report does not depend on it.
     """
     from pm_joint.analysis.posterior import criticize
 
@@ -246,7 +249,7 @@ def criticize_campaign(
     if measured is None:
         workspace = folder if isinstance(folder, Workspace) else Workspace(folder)
         measured = workspace.backbones
-    crit = criticize(model, measured, posterior=posterior)
+    crit = criticize(model, measured, posterior=posterior, executor=executor)
     for _ in range(rounds):
         proposals = crit.missing()
         if not proposals:

@@ -2,6 +2,7 @@
 adequacy and admissibility, groups, the add loop, reports, posterior bands, and the
 hidden-effect studies on the virtual rig."""
 
+import dataclasses
 import json
 from functools import cache
 
@@ -12,11 +13,14 @@ from oscillators import measured_curve
 
 from identification.analytical.harmonic import backbone as harmonic_backbone
 from identification.criticism.criticism import criticize
+from identification.criticism.directions import base_jacobian
 from identification.criticism.plots import plot_history
+from identification.fitting.prediction import predict_channels
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
 from identification.rig import (
     HIDDEN_EFFECT_SCENARIOS,
+    LAB_HIDDEN_SCENARIOS,
     LAB_NULL_SCENARIOS,
     LAB_OUT_OF_CATALOGUE_SCENARIOS,
 )
@@ -141,6 +145,36 @@ def test_damping_effects_are_found_and_read(effect, coefficient, words):
             crit.add("stribeck_friction", x_s=1.0)
 
 
+def test_stribeck_friction_is_probed_where_it_acts():
+    """Stribeck friction that vanishes within the test (v_s = 0.1 m/s: Coulomb-like at
+    0.05 mm, gone above 0.3 mm), on backbones that carry their 2nd and 3rd harmonics (so
+    every direction goes through the multi-harmonic balance). A probe sized at the
+    effect's default decay velocity and the largest amplitude is 1e11 times too strong
+    where the term acts, the balance has no solution there and the effect would have no
+    direction at all; each shape's probe is sized where that shape acts, and Stribeck's
+    law is found first, beyond Coulomb's."""
+    truth = linear(stribeck_friction={"coefficient": 0.3, "v_s": 0.1})
+    rng = np.random.default_rng(3)
+    curves = []
+    for i in range(3):
+        model = truth.replace(linear_stiffness=K0 * np.exp(0.005 * rng.standard_normal()))
+        hb = harmonic_backbone(model, AMPS, method="multi", harmonics=5)
+        ratios = (hb.harmonics_cos_m[:, 2:4] - 1j * hb.harmonics_sin_m[:, 2:4]) / AMPS[:, None]
+        noise = 1e-5 * (rng.standard_normal(ratios.shape) + 1j * rng.standard_normal(ratios.shape))
+        curve = measured_curve(hb, rng, 0.003, 2e-6, f"assembly{i}")
+        curves.append(
+            dataclasses.replace(
+                curve, harmonics=ratios + noise, harmonic_standard_error=np.full(ratios.shape, 1e-5)
+            )
+        )
+    candidates = ["coulomb_friction", "stribeck_friction", "quadratic_damping"]
+    crit = criticize(linear(), BackboneSet(curves), n_bootstrap=500, candidates=candidates)
+    assert crit.base.method == "multi"
+    stribeck = next(c for c in crit.candidates if c.effect == "stribeck_friction")
+    assert stribeck.significant and stribeck.gain > crit.effect_gains["coulomb_friction"][0]
+    assert crit.missing()[0].effect == "stribeck_friction", crit.summary()
+
+
 def test_effects_the_data_cannot_separate_form_a_group():
     """Stribeck's law with its decay velocity far above every velocity of the test is
     Coulomb's: both explain Coulomb data equally, so they form a group (a ranking inside
@@ -243,6 +277,46 @@ def test_report_json_and_figures(linear_criticised, tmp_path):
     assert len(ax.get_xticklabels()) == 2
 
 
+def test_level_wise_predictions_are_driven_by_the_measured_excitation():
+    """lab-distorted (2nd/3rd harmonic of 4 %/3 % in the base acceleration, the lab rig's
+    time-domain engine): the truth's structure, refitted, predicts the mean harmonics at
+    the comparison levels within two hold-fit standard errors when the level-wise
+    prediction is driven by the excitation measured there, as the points' predictions
+    are; a pure sine leaves the response's 2nd harmonic more than four standard errors
+    unexplained. The linearised directions are driven the same way (the viscous damping
+    moves the forced harmonics), and nothing is missing."""
+    from identification.fitting.data import HARMONIC_CHANNELS
+    from identification.measurements.extraction import extract_backbones
+    from identification.rig import RIG_PRESETS, rig_for_preset
+
+    rig = rig_for_preset("lab-distorted", levels=5, noise_m_s=1e-5)
+    measured = extract_backbones(record for record, _ in rig.campaign(assemblies=3, seed=0))
+    crit = criticize(RIG_PRESETS["lab-distorted"].base_model, measured)
+    data = crit.data
+    levels = data.levels_m
+    forced = crit.predict_at(crit.base.model, levels)
+    pure = predict_channels(crit.base.model, levels, data.channels, method="multi")
+    # the standard error of the mean harmonics from the hold fits (not the likelihood's floor)
+    hold_se = np.sqrt(np.nanmean(data.at_levels(data.standard_error**2), axis=0) / data.n_curves)
+    columns = [data.column(c) for c in HARMONIC_CHANNELS]
+    mean = np.column_stack([crit.comparison[c]["measured_mean"] for c in HARMONIC_CHANNELS])
+    z_forced = (mean - forced[:, columns]) / hold_se[:, columns]
+    z_pure = (mean - pure[:, columns]) / hold_se[:, columns]
+    assert np.abs(z_forced).max() < 2, z_forced
+    assert np.abs(z_pure[:, HARMONIC_CHANNELS.index("harmonic2_sin")]).max() > 4, z_pure
+    free = list(crit.base.free)
+    driven = base_jacobian(crit.base.model, free, data, "multi", crit.metric)
+    unforced = dataclasses.replace(data, excitation_harmonics=None)
+    sine = base_jacobian(crit.base.model, free, unforced, "multi", crit.metric)
+    harmonic_rows = np.isin(
+        np.flatnonzero(crit.metric.keep) % len(data.channels), columns
+    )  # the entries of the harmonic channels
+    damping = free.index("viscous_damping")
+    assert not sine[harmonic_rows, damping].any()
+    assert np.abs(driven[harmonic_rows, damping]).max() > 0
+    assert crit.verdict == "nothing missing" and not crit.where(), crit.summary()
+
+
 def test_posterior_band_covers_its_population():
     """Curves drawn from the posterior's own population fall inside its 95 % band;
     a posterior without the hardening does not cover the large amplitudes. The
@@ -286,8 +360,8 @@ def test_posterior_band_covers_its_population():
 
 
 @cache
-def study(scenario: str, seed: int = 0):
-    return criticism_study(scenario, seed, assemblies=3, levels=8)
+def study(scenario: str, seed: int = 0, start: str = "base"):
+    return criticism_study(scenario, seed, start=start, assemblies=3, levels=8)
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS)
@@ -337,6 +411,21 @@ def test_hidden_effect_study_over_seeds(scenario, seed):
     assert result.passed, result.row()
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize("start", ["linear", "sindy"])
+@pytest.mark.parametrize("scenario", LAB_HIDDEN_SCENARIOS)
+def test_lab_hidden_effect_from_what_users_start_from(scenario, start, seed):
+    """The issue's acceptance: each catalogue effect hidden in a lab-like campaign (3
+    assemblies, 8 levels, distortion, ripple, drift, dropouts) is found from a bare
+    linear-viscous start and from SINDy's polynomial model: ranked first, or in a
+    flagged group that holds it, with only the truth's effects added before, and the
+    key channel's error down by 80 % once it is added (or already in the start, and
+    then nothing significant is left)."""
+    result = study(scenario, seed, start)
+    assert result.passed, result.row()
+
+
 # --------------------------------------------------------------------------
 # Lab scenarios (identification.rig.rig_for_preset): artefacts are not physics
 
@@ -359,31 +448,19 @@ def test_lab_drift_is_drift_not_physics():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", range(5))
-@pytest.mark.parametrize(
-    "scenario",
-    [
-        pytest.param(
-            s,
-            marks=pytest.mark.xfail(
-                reason="seed 0 measured: the free-form reference fires on the 2nd harmonic at "
-                "the lowest level (0.58 % of the fundamental): the excitation's harmonics are "
-                "not yet forcing the model (crit-measure's branch)"
-            ),
-        )
-        if s in ("lab-all", "lab-all-hardening")
-        else s
-        for s in LAB_NULL_SCENARIOS
-    ],
-)
+@pytest.mark.parametrize("scenario", LAB_NULL_SCENARIOS)
 def test_lab_null_scenarios_find_nothing(scenario, seed):
     result = study(scenario, seed)
     assert result.passed and not result.false_discovery, result.row()
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("start", ["base", "sindy"])
 @pytest.mark.parametrize("scenario", LAB_OUT_OF_CATALOGUE_SCENARIOS)
-def test_out_of_catalogue_physics_is_not_explained_as_physics(scenario):
-    result = study(scenario)
+def test_out_of_catalogue_physics_is_not_explained_as_physics(scenario, start):
+    """From the truth's catalogue part and from SINDy's polynomial model: "not explained by
+    the catalogue" or "partly explained", and no inadmissible fit proposed."""
+    result = study(scenario, 0, start)
     crit = result.criticisms[0]
     assert crit.verdict in ("not explained by the catalogue", "partly explained"), crit.summary()
     assert all(not c.problems for c in crit.missing())

@@ -113,9 +113,33 @@ def test_a_stiffness_cancelled_by_a_large_tanh_is_inadmissible():
     model = JointModel({"linear_stiffness": 4 * K0, "viscous_damping": C0,
                         "tanh_saturation": {"coefficient": -3 * K0 * x_s, "x_s": x_s}})  # fmt: skip
     problems = admissibility(model, LEVELS_M, *_predicted(model))
-    assert any("terms cancel in the equivalent stiffness" in p for p in problems)
-    ratio = float(problems[0].split("up to ")[1].split("×")[0])
+    (cancel,) = [p for p in problems if "terms cancel in the equivalent stiffness" in p]
+    ratio = float(cancel.split("up to ")[1].split("×")[0])
     assert ratio == pytest.approx(7.0, rel=0.05)
+
+
+def test_a_hardening_told_as_a_stiffer_structure_minus_a_spring_is_inadmissible():
+    """A clearance's hardening (lab-clearance from SINDy's cubic start, seed 0) was fitted
+    as a 46 % stiffer structure, a cubic turned softening, and a tanh taking 1.9e5 off at
+    rest: terms adding up to under twice their net, so no cancellation is flagged, but the
+    tanh is a spring pushing away from equilibrium at rest. A saturating spring that
+    carries load at rest (the lab's tanh truth), cubic softening or hardening and x|x|
+    have no negative stiffness at rest."""
+    tanh = {"coefficient": -144.6, "x_s": 7.543e-4}
+    clearance = JointModel({"linear_stiffness": 5.929e5, "viscous_damping": 3.766,
+                            "cubic_stiffness": -1.859e10, "tanh_saturation": tanh})  # fmt: skip
+    problems = admissibility(clearance, LEVELS_M, *_predicted(clearance))
+    assert not any("terms cancel" in p for p in problems)
+    (rest,) = problems
+    assert rest.startswith("tanh_saturation has a negative stiffness at rest (-1.92e+05, 32 %")
+    for physical in (
+        linear(tanh_saturation={"coefficient": 20.0, "x_s": 5e-4}).replace(
+            linear_stiffness=K0 - 4e4
+        ),
+        linear(cubic_stiffness=-2e10),
+        linear(cubic_stiffness=1.4e10, abs_stiffness=-2.4e7),
+    ):
+        assert admissibility(physical, LEVELS_M, *_predicted(physical)) == [], physical
 
 
 def test_a_physical_joint_is_admissible():

@@ -9,6 +9,10 @@ coefficients must describe a joint a resonance test could have measured
   power in at every level;
 * **friction and slip forces oppose the motion**: effects whose physics has a sign
   (:attr:`identification.effects.Effect.coefficient_sign`) have it;
+* **no joint term pushes away from equilibrium at rest**: a nonlinear term whose
+  stiffness at rest (its equivalent stiffness as the amplitude goes to zero) is
+  negative, which a larger linear stiffness then makes up for (a hardening described
+  as a stiffer structure minus a saturating spring), is a negative spring, not a joint;
 * **no large cancelling terms**: where the terms' equivalent stiffnesses (or
   dampings) ``c_i k_eq,i(a)`` add up in absolute value to much more than their net
   sum (``Σ|c_i k_eq,i| > CANCELLATION · |Σ c_i k_eq,i|``), the fit trades terms
@@ -68,6 +72,8 @@ def admissibility(
             f"negative total damping (energy fed in by the joint) at {mm[negative].min():.2g}–"
             f"{mm[negative].max():.2g} mm"
         )
+    if np.isfinite(frequency_hz).any():
+        problems += _negative_at_rest(model, levels_m[0], 2 * np.pi * np.nanmin(frequency_hz))
     for term in model.terms:
         sign = CATALOGUE[term.effect].coefficient_sign
         if sign and np.sign(term.coefficient) == -sign:
@@ -97,3 +103,27 @@ def admissibility(
                     f"{ratio[worst]:.1f}× the net at {1e3 * a[worst]:.2g} mm ({words})"
                 )
     return problems
+
+
+#: Where "at rest" is evaluated, as a share of the smallest tested amplitude; a stiffness at
+#: rest below this share of the linear one is a rounding (a cubic term's there is ~1e-6 of it).
+AT_REST = 1e-3
+
+
+def _negative_at_rest(model: JointModel, smallest_m: float, omega: float) -> list[str]:
+    """Nonlinear terms with a negative stiffness at rest, made up for by the linear one."""
+    out = []
+    linear = model.coefficient("linear_stiffness") if "linear_stiffness" in model else 0.0
+    rest = np.array([AT_REST * smallest_m])
+    for term in model.terms:
+        if term.effect == "linear_stiffness":
+            continue
+        k_eq, _ = CATALOGUE[term.effect].describing(rest, np.array([omega]), **term.shape)
+        at_rest = float(term.coefficient * np.ravel(k_eq)[0])
+        if linear > 0 and at_rest < -AT_REST * linear:  # beyond a rounding of the linear term
+            out.append(
+                f"{term.effect} has a negative stiffness at rest ({at_rest:.3g}, "
+                f"{100 * -at_rest / linear:.2g} % of the linear stiffness it is added to): "
+                "a spring pushing away from equilibrium, made up for by a stiffer structure"
+            )
+    return out

@@ -73,6 +73,7 @@ from identification.criticism.reference import FreeForm, explained_share, fit_re
 from identification.effects import CATALOGUE, get_effect
 from identification.fitting.data import (
     BACKBONE_CHANNELS,
+    FAILED_RESIDUAL,
     HARMONIC_ORDERS,
     FitData,
     Metric,
@@ -371,6 +372,8 @@ class Criticism:
         Steps of the loop so far, this model last.
     previous_rounds
         The earlier rounds' reports (:meth:`round_report`), first first.
+    executor
+        Where the candidates' refits run (see :func:`criticize`); None: here.
     """
 
     def __init__(
@@ -391,6 +394,7 @@ class Criticism:
         rounds: Sequence[Mapping[str, Any]] = (),
         action: str | None = None,
         prefitted: Mapping[str, FitResult] | None = None,
+        executor: Any = None,
     ) -> None:
         if criterion not in ("aic", "bic"):
             raise ValueError(f"criterion must be 'aic' or 'bic', got {criterion!r}")
@@ -411,6 +415,7 @@ class Criticism:
         self.candidate_effects = _candidate_list(model, candidates)
         self.previous_rounds = [dict(r) for r in rounds]
         self._prefitted = dict(prefitted or {})
+        self.executor = executor
         self.fit = evaluate(
             model, data, method=method, weights=weights, n_parameters=len(default_free(model))
         )
@@ -468,7 +473,7 @@ class Criticism:
         names, draws = self.posterior
         samples = predict_channels(
             self.model, self.data.amplitude_m, self.data.channels, method=self.base.method,
-            parameters=draws, names=names,
+            parameters=draws, names=names, excitation_harmonics=self.data.excitation_harmonics,
         )  # fmt: skip
         tables = mean_prediction(self.data, samples).reshape(len(draws), -1)[:, metric.keep]
         ok = np.isfinite(tables).all(axis=1)
@@ -477,6 +482,29 @@ class Criticism:
             # The draws spread like the population; its mean curve is known to 1/n of that.
             spread = spread / self.data.n_curves
         return Metric(metric.keep, metric.weights, metric.covariance.widened(np.atleast_2d(spread)))
+
+    def predict_at(
+        self,
+        model: JointModel,
+        amplitude_m: ArrayLike,
+        channels: Sequence[str] | None = None,
+        *,
+        method: str | None = None,
+        parameters: ArrayLike | None = None,
+        names: Sequence[str] | None = None,
+    ) -> np.ndarray:
+        """A model's prediction at amplitudes other than the points (the levels, a plotting
+        grid), driven as the points are: by the excitation the holds measured there
+        (:meth:`~identification.fitting.data.FitData.excitation_at`), not by a pure sine.
+
+        ``channels`` default to the data's, ``method`` to the refitted base model's;
+        ``parameters``/``names`` as :func:`~identification.fitting.prediction.predict_channels`.
+        """
+        return predict_channels(
+            model, amplitude_m, self.data.channels if channels is None else channels,
+            method=method or self.base.method, parameters=parameters, names=names,
+            excitation_harmonics=self.data.excitation_at(amplitude_m),
+        )  # fmt: skip
 
     # ------------------------------------------------------------ the statistics
     @cached_property
@@ -490,9 +518,15 @@ class Criticism:
             base.model, self.candidate_effects, self.data, base.method, metric
         )
         reference, channels = reference_directions(self.data, metric)
+        # Where the refitted model has no periodic solution the likelihood counts the miss
+        # as FAILED_RESIDUAL standard errors (said in words by the summary), and a step of
+        # a parameter there gives no direction.
+        residual = self.data.mean_residual(base.predicted)
+        failed = ~np.isfinite(residual) & self.data.used
+        residual = np.where(failed, FAILED_RESIDUAL * self._standard_error, residual)
         return cal.Problem.build(
-            self.data, metric, self.data.mean_residual(base.predicted), jacobian,
-            columns, directions, reference, channels,
+            self.data, metric, residual, np.nan_to_num(jacobian, nan=0.0, posinf=0.0,
+            neginf=0.0), columns, directions, reference, channels,
         )  # fmt: skip
 
     @cached_property
@@ -545,10 +579,9 @@ class Criticism:
         band = None
         if self.posterior is not None:
             names, draws = self.posterior
-            samples = predict_channels(
-                self.model, data.levels_m, data.channels, method=self.base.method,
-                parameters=draws, names=names,
-            )  # fmt: skip
+            samples = self.predict_at(
+                self.model, data.levels_m, method=self.base.method, parameters=draws, names=names
+            )
             band = np.nanquantile(samples, [0.025, 0.975], axis=0)
             curves = data.curves_at_levels
         for j, channel in enumerate(data.channels):
@@ -599,7 +632,8 @@ class Criticism:
         for channel in BACKBONE_CHANNELS:
             j = self.data.column(channel)
             residual, _ = self.residual(channel)
-            significant = np.abs(np.nan_to_num(z[:, j])) > bound
+            # levels with no periodic solution are said in words (the summary's own line)
+            significant = (np.abs(np.nan_to_num(z[:, j])) > bound) & np.isfinite(residual)
             for start, stop in _runs(np.sign(residual) * significant, 1):
                 worst = start + int(np.argmax(np.abs(z[start:stop, j])))
                 ranges.append(
@@ -620,7 +654,7 @@ class Criticism:
                                       for p in ("cos", "sin")))  # fmt: skip
                 predicted = np.hypot(*(self.comparison[f"harmonic{order}_{p}"]["predicted"]
                                        for p in ("cos", "sin")))  # fmt: skip
-                for start, stop in _runs((parts > bound).astype(float), 1):
+                for start, stop in _runs(((parts > bound) & np.isfinite(miss)).astype(float), 1):
                     worst = start + int(np.argmax(parts[start:stop]))
                     ranges.append(
                         FailureRange(
@@ -649,26 +683,48 @@ class Criticism:
         return (fires["catalogue"] or fires["reference"]) and fires["where"]
 
     # ---------------------------------------------------------------- missing
+    def _extension(self, effect: str, **shape: float) -> tuple[JointModel, dict[str, Any]]:
+        """The refitted base model with ``effect`` added (coefficient 0 marks it as new:
+        :func:`fit_backbones` scans its start) and the options of its refit."""
+        if effect in self.model:
+            raise ValueError(
+                f"effect {effect!r} is already in the model ({', '.join(self.model.effects)})"
+            )
+        method = self._method_for(self.model.with_effect(effect, 0.0, **shape))
+        extended = self._base_fit(method).model.with_effect(effect, 0.0, **shape)
+        scan = {f"{effect}.{k}": [v] for k, v in shape.items()}
+        scan = {k: v for k, v in scan.items() if k in extended.parameter_names}
+        return extended, {
+            "method": method,
+            "weights": self.weights or None,
+            "shape_scan": scan or None,
+        }
+
     def _extended_fit(self, effect: str, **shape: float) -> FitResult:
         key = f"add:{effect}"
         if shape or key not in self._prefitted:
-            if effect in self.model:
-                raise ValueError(
-                    f"effect {effect!r} is already in the model ({', '.join(self.model.effects)})"
-                )
-            # Coefficient 0 marks the effect as new: fit_backbones scans its start.
-            method = self._method_for(self.model.with_effect(effect, 0.0, **shape))
-            extended = self._base_fit(method).model.with_effect(effect, 0.0, **shape)
-            scan = {f"{effect}.{k}": [v] for k, v in shape.items()}
-            scan = {k: v for k, v in scan.items() if k in extended.parameter_names}
-            result = fit_backbones(
-                extended, self.data, method=method, weights=self.weights or None,
-                shape_scan=scan or None,
-            )  # fmt: skip
+            extended, options = self._extension(effect, **shape)
+            result = fit_backbones(extended, self.data, **options)
             if shape:
                 return result
             self._prefitted[key] = result
         return self._prefitted[key]
+
+    def _refit_on_executor(self) -> None:
+        """The candidates' refits, each a task on :attr:`executor` (anything with
+        ``submit(fn, *args, **kwargs)``: a dask ``Client``, a ``concurrent.futures``
+        pool). Each refit is the serial one, started from the same refitted base model, so
+        the criticism does not depend on where it ran."""
+        todo = [e for e in self._to_refit if f"add:{e}" not in self._prefitted]
+        if self.executor is None or len(todo) < 2:
+            return
+        jobs = {e: self._extension(e) for e in todo}  # the base fits, here, once per method
+        futures = {
+            e: self.executor.submit(fit_backbones, extended, self.data, **options)
+            for e, (extended, options) in jobs.items()
+        }
+        for effect, future in futures.items():
+            self._prefitted[f"add:{effect}"] = future.result()
 
     def _flat_residual(self, fit: FitResult) -> np.ndarray:
         metric = self.metric
@@ -743,8 +799,8 @@ class Criticism:
         else:
             status = "not explained by the catalogue"
         # The effect's own contribution (the rest of the refitted model kept) for the words.
-        alone = predict_channels(fit.model.without(effect), levels, channels, method=fit.method)
-        own_points = predict_channels(fit.model, levels, channels, method=fit.method) - alone
+        alone = self.predict_at(fit.model.without(effect), levels, method=fit.method)
+        own_points = self.predict_at(fit.model, levels, method=fit.method) - alone
         own = own_points if np.isfinite(alone).all() else ext - without
         return Candidate(
             effect=effect,
@@ -777,6 +833,7 @@ class Criticism:
         separate from the best one, fewest new parameters first), then the other refitted
         ones by their ``χ²`` gain — those that would do but that the data separate from the
         best are "not preferred" — then the rest by their linearised gain."""
+        self._refit_on_executor()
         tried = [self._candidate(e) for e in self.candidate_effects]
         refitted = sorted((c for c in tried if c.fit is not None), key=lambda c: -c.delta_chi2)
         proposable = [c for c in refitted if c.proposed]
@@ -864,7 +921,7 @@ class Criticism:
                 se[:, j] = self._standard_error[:, data.column(channel)]
 
         def predict(c: Candidate, amplitudes: np.ndarray) -> np.ndarray:
-            return predict_channels(c.fit.model, amplitudes, channels, method="multi")
+            return self.predict_at(c.fit.model, amplitudes, channels, method="multi")
 
         inside = np.abs(predict(first, data.levels_m) - predict(other, data.levels_m)) / se
         edges = np.vstack([np.repeat(se[:1], 3, axis=0), np.repeat(se[-1:], 3, axis=0)])
@@ -1011,6 +1068,7 @@ class Criticism:
             rounds=self.rounds,
             action=f"+ {effect}",
             prefitted={f"base:{fit.method}": fit},
+            executor=self.executor,
         )
 
     # ------------------------------------------------------------------- text
@@ -1307,6 +1365,7 @@ def criticize(
     weights: Mapping[str, float] | None = None,
     noise_floor: Mapping[str, float] | None = None,
     n_periods: int = 70,
+    executor: Any = None,
 ) -> Criticism:
     """Compare a model with measured backbones, decide whether something is missing, rank
     what the catalogue offers, and say when it does not explain the data.
@@ -1350,6 +1409,10 @@ def criticize(
         See :func:`identification.fitting.least_squares.fit_backbones`.
     n_periods
         Periods per hold used for the backbone points of ``records``.
+    executor
+        Where the candidates' nonlinear refits run, each a task: anything with
+        ``submit(fn, *args, **kwargs)`` (a dask ``Client``, a ``concurrent.futures``
+        executor); None: here, one after the other. The result does not depend on it.
 
     Raises
     ------
@@ -1380,7 +1443,7 @@ def criticize(
     return Criticism(
         model, data, method=method, weights=weights, candidates=candidates, criterion=criterion,
         alpha=alpha, n_bootstrap=n_bootstrap, seed=seed, posterior=draws,
-        posterior_kind=posterior_kind, history=steps,
+        posterior_kind=posterior_kind, history=steps, executor=executor,
     )  # fmt: skip
 
 

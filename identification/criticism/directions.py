@@ -86,7 +86,7 @@ def base_jacobian(
     model: JointModel, free: Sequence[str], data: FitData, method: str, metric: Metric
 ) -> np.ndarray:
     """``(p, k)`` derivative of the mean prediction by each free parameter (shape
-    parameters by their logarithm)."""
+    parameters by their logarithm), each point driven by its measured excitation."""
     values = np.array([model.parameters[n] for n in free])
     is_log = np.array(["." in n for n in free])
     scale = fit_scale(model, data)
@@ -103,19 +103,30 @@ def base_jacobian(
     trial = values + np.diag(move)
     rows = np.vstack([values, trial])
     predicted = predict_channels(
-        model, data.amplitude_m, data.channels, method=method, parameters=rows, names=list(free)
-    )
+        model, data.amplitude_m, data.channels, method=method, parameters=rows, names=list(free),
+        excitation_harmonics=data.excitation_harmonics,
+    )  # fmt: skip
     tables = mean_prediction(data, predicted)
     return _flat(metric, (tables[1:] - tables[0]) / step[:, None, None])
 
 
-def _probe_coefficient(effect: str, model: JointModel, data: FitData) -> float:
-    if effect == "microslip":
-        return PROBE  # the shape grid sets the stuck stiffness (a tenth of the model's)
+def _probe_coefficients(
+    effect: str, shapes: Sequence[dict[str, float]], model: JointModel, data: FitData
+) -> np.ndarray:
+    """The probe of each shape column: where that shape makes the term strongest over the
+    tested amplitudes, its force reaches :data:`PROBE` of the linear force (a Stribeck
+    drop or a saturation of one shape acts at small amplitudes only, of another at
+    all; one probe for every shape would be lost in the solver's noise for some and
+    leave the linear range for others)."""
+    if effect == "microslip":  # the shape grid sets the stuck stiffness (a tenth of the model's)
+        return np.full(len(shapes), PROBE)
     scale = fit_scale(model, data)
-    return PROBE * natural_coefficient(
-        effect, scale.amplitude_m[1], math.sqrt(scale.stiffness), scale.stiffness
-    )
+    amplitudes = np.geomspace(*scale.amplitude_m, 5)
+    omega = math.sqrt(scale.stiffness)
+    return np.array([
+        PROBE * natural_coefficient(effect, amplitudes, omega, scale.stiffness, **shape)
+        for shape in shapes
+    ])  # fmt: skip
 
 
 def candidate_directions(
@@ -130,9 +141,11 @@ def candidate_directions(
 
     Each column is the difference of the model with and without the probe, both
     through the harmonic balance the extended model needs (an even term needs the
-    multi-harmonic one). Columns whose change is below :data:`SILENT` standard errors
-    are returned as zeros: the effect has no first-order signature on these data (so
-    are those of shapes where the harmonic balance has no solution at some point).
+    multi-harmonic one) and both driven by the excitation each point's hold measured
+    (as the fit's predictions are), with a probe sized for each shape. Columns whose
+    change is below :data:`SILENT` standard errors are returned as zeros: the effect has
+    no first-order signature on these data (so are those of shapes where the harmonic
+    balance has no solution at some point).
     """
     columns, directions = [], []
     se = metric.covariance.standard_error
@@ -140,23 +153,20 @@ def candidate_directions(
         spec = get_effect(effect)
         grid = spec.shape_grid(fit_scale(model, data))
         shapes = _product(grid)
-        probe = _probe_coefficient(effect, model, data)
-        extended = model.with_effect(effect, probe, **shapes[0])
+        probe = _probe_coefficients(effect, shapes, model, data)
+        extended = model.with_effect(effect, probe[0], **shapes[0])
         how = resolve_method(method if method == "multi" else "auto", extended, data)
-        with_probe = (
-            predict_channels(
-                extended,
-                data.amplitude_m,
-                data.channels,
-                method=how,
-                parameters=np.array([list(s.values()) for s in shapes]),
-                names=[f"{effect}.{name}" for name in grid],
-            )
-            if grid
-            else predict_channels(extended, data.amplitude_m, data.channels, method=how)[None]
+        forcing = {"method": how, "excitation_harmonics": data.excitation_harmonics}
+        with_probe = predict_channels(
+            extended,
+            data.amplitude_m,
+            data.channels,
+            parameters=np.column_stack([probe, [list(s.values()) for s in shapes]]),
+            names=[effect] + [f"{effect}.{name}" for name in grid],
+            **forcing,
         )
-        without = predict_channels(model, data.amplitude_m, data.channels, method=how)
-        change = _flat(metric, mean_prediction(data, with_probe - without[None]) / probe)
+        without = predict_channels(model, data.amplitude_m, data.channels, **forcing)
+        change = _flat(metric, mean_prediction(data, with_probe - without[None])) / probe
         # A shape where the harmonic balance fails somewhere gives no direction at all.
         failed = ~np.isfinite(change).all(axis=0)
         change[:, failed] = 0.0

@@ -19,6 +19,7 @@ and said so).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -122,7 +123,9 @@ def branch_drift(data: FitData, alpha: float) -> list[Drift]:
             se = float(np.sqrt(np.sum((dd - rate * tt) ** 2) / max(df, 1) / np.sum(tt**2)))
             units = f"{dd.size} levels of {len(rates)} run(s), assumed independent"
         p = float(2 * stats.t.sf(abs(rate) / se, df)) if se > 0 and df > 0 else 1.0
-        level_mean = np.nanmean(np.where(both, d, np.nan), axis=0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # levels only one branch reaches
+            level_mean = np.nanmean(np.where(both, d, np.nan), axis=0)
         largest = float(level_mean[np.nanargmax(np.abs(level_mean))])
         out.append(
             Drift(channel, rate, se, "hour" if scale > 1 else "hold", p, units, largest, p < alpha)

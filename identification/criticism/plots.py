@@ -21,7 +21,6 @@ import numpy as np
 from identification.artifacts import atomic_write_bytes
 from identification.criticism.readings import CHANNEL_LABELS
 from identification.fitting.data import HARMONIC_ORDERS
-from identification.fitting.prediction import predict_channels
 
 __all__ = ["plot_comparison", "plot_freeform", "plot_history", "plot_signatures", "write_figures"]
 
@@ -59,7 +58,7 @@ def plot_comparison(crit: Any, axes) -> Any:
     levels_mm = 1e3 * data.levels_m
     grid = np.geomspace(data.amplitude_m.min(), data.amplitude_m.max(), 80)
     model = crit.base.model
-    curve = predict_channels(model, grid, data.channels, method=crit.base.method)
+    curve = crit.predict_at(model, grid)
     mean_residual = data.mean_residual(crit.base.predicted)
     bound = crit.calibration.where_bound
     failures = crit.where()

@@ -6,10 +6,14 @@ Measured curves ``Y_c`` (``n`` curves, each at the same ``L`` amplitude levels i
 is stiffer at every level), so the points of one curve are *not* independent: the
 mean curve ``Ȳ`` has covariance ``Σ/n`` with ``Σ`` the between-curve covariance of
 whole curves. With a handful of curves (``n ≪ p``) the sample covariance is
-singular, so it is shrunk (Schäfer & Strimmer 2005, target "D": correlations
-toward zero with the data-driven intensity; the variances of each channel toward
-its median over the levels, Opgen-Rhein & Strimmer 2007), and floored by the
-hold fits' own standard errors.
+singular, so it is shrunk (Schäfer & Strimmer 2005, with the data-driven intensity):
+the correlations toward a target stationary along the levels
+(:func:`along_levels_target`: within a channel the correlation depends on the level
+distance only, pooled over the levels, which keeps the strong correlation of an
+assembly's offsets along the curve that a target of zero correlation shrinks away with
+few curves; zero between channels), the variances
+of each channel toward its median over the levels (Opgen-Rhein & Strimmer 2007); and
+floored by the hold fits' own standard errors.
 
 A stated **systematic floor** (what the measurement chain adds that does not
 average out over curves: a phase-detector bias, sensor nonlinearity) is added to
@@ -36,7 +40,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.linalg import solve_triangular
 
-__all__ = ["LevelCovariance", "estimate", "gasser_noise_variance", "shrunk_covariance"]
+__all__ = [
+    "LevelCovariance",
+    "along_levels_target",
+    "estimate",
+    "gasser_noise_variance",
+    "shrunk_covariance",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,7 +111,7 @@ def shrunk_covariance(
     Parameters
     ----------
     curves
-        ``(batch, n, p)`` curves (``n ≥ 2``), flattened over levels and channels.
+        ``(batch, n, p)`` curves (``n ≥ 2``), flattened level-major (entry ``l·C + c``).
     channel_of
         ``(p,)`` channel index of each entry: the variances of a channel shrink
         toward that channel's median (channels have different units).
@@ -131,7 +141,7 @@ def shrunk_covariance(
     lam_v = np.where(np.isfinite(lam_v), lam_v, 1.0)
     shrunk_variance = lam_v[:, None] * target + (1 - lam_v[:, None]) * variance
     shrunk_variance = np.maximum(shrunk_variance, variance_floor)
-    # Correlations: toward zero (target D), with the estimated variance of each r_ij.
+    # Correlations: toward the stationary target, with the estimated variance of each r_ij.
     if n < 3:
         # Two curves correlate every pair by ±1: no information on the correlations.
         lam_r = np.ones(batch)
@@ -139,20 +149,68 @@ def shrunk_covariance(
     else:
         scale = np.sqrt(np.where(variance > 0, variance, 1.0))
         standard = centred / scale[:, None, :]
-        products = np.einsum("bki,bkj->bkij", standard, standard)
-        mean_product = products.mean(axis=1)
-        var_r = n / (n - 1) ** 3 * np.sum((products - mean_product[:, None]) ** 2, axis=1)
+        # Σ_k (w_kij − w̄_ij)² with w_kij = u_ki u_kj, as Σ_k u_ki² u_kj² − n w̄_ij²: two
+        # matrix products instead of an (n, p, p) array per campaign.
+        mean_product = np.swapaxes(standard, 1, 2) @ standard / n
+        fourth = np.swapaxes(standard**2, 1, 2) @ standard**2
+        var_r = n / (n - 1) ** 3 * np.clip(fourth - n * mean_product**2, 0.0, None)
         r = mean_product * n / (n - 1)
+        target = along_levels_target(r, channel_of)
         off = ~np.eye(p, dtype=bool)
         with np.errstate(invalid="ignore", divide="ignore"):
-            lam_r = np.clip(var_r[:, off].sum(axis=1) / (r[:, off] ** 2).sum(axis=1), 0.0, 1.0)
+            lam_r = np.clip(
+                var_r[:, off].sum(axis=1) / ((r - target)[:, off] ** 2).sum(axis=1), 0.0, 1.0
+            )
         lam_r = np.where(np.isfinite(lam_r), lam_r, 1.0)
-        correlation = (1 - lam_r[:, None, None]) * r
+        correlation = (1 - lam_r[:, None, None]) * r + lam_r[:, None, None] * target
         correlation[:, np.arange(p), np.arange(p)] = 1.0
         flat = (variance <= 0)[:, :, None] | (variance <= 0)[:, None, :]
         correlation = np.where(flat & off, 0.0, correlation)
     sd = np.sqrt(shrunk_variance)
     return correlation * sd[:, :, None] * sd[:, None, :], lam_r, lam_v
+
+
+def along_levels_target(correlation: np.ndarray, channel_of: np.ndarray) -> np.ndarray:
+    """Shrinkage target of the correlations: within each channel stationary along the
+    levels (a function of the level distance only), between channels zero.
+
+    An assembly's offsets move every level of a channel together (a stiffer assembly is
+    stiffer at every amplitude), so neighbouring levels of a curve are strongly
+    correlated; a target of zero correlation shrinks that away with few curves, and a
+    bootstrap drawn from the shrunk estimate then under-disperses the smooth directions
+    the candidates test. The target's correlation of a channel at levels ``l`` and
+    ``l + k`` pools every such pair, divided by the number of levels (the biased,
+    Bartlett autocorrelation: the sum of each curve's own, so every channel's block is
+    positive definite; long distances are tapered toward zero). Correlations between
+    channels are not pooled: a block-Toeplitz target across channels has rank at most
+    ``n·(2L − 1)``, singular with few curves and several channels.
+
+    Parameters
+    ----------
+    correlation
+        ``(batch, p, p)`` sample correlations, unit diagonal, entries level-major.
+    channel_of
+        ``(p,)`` channel of each entry; every level has every channel, in the same order.
+
+    Returns
+    -------
+    ``(batch, p, p)`` target correlations (unit diagonal).
+    """
+    channels = np.unique(channel_of).size
+    levels = channel_of.size // channels
+    grid = correlation.reshape(-1, levels, channels, levels, channels)
+    within = np.diagonal(grid, axis1=2, axis2=4)  # (batch, l, l', c)
+    # pooled[b, k, c]: the mean over l of the correlation of (l, c) with (l + k, c), k ≥ 0
+    pooled = np.stack(
+        [np.trace(within, offset=k, axis1=1, axis2=2) / levels for k in range(levels)], axis=1
+    )
+    distance = np.abs(np.arange(levels)[:, None] - np.arange(levels)[None, :])
+    target = np.zeros_like(grid)
+    for c in range(channels):
+        target[:, :, c, :, c] = pooled[:, distance, c]
+    target = target.reshape(correlation.shape)
+    target[:, np.arange(channel_of.size), np.arange(channel_of.size)] = 1.0
+    return target
 
 
 def gasser_noise_variance(values: np.ndarray, positions: np.ndarray) -> np.ndarray:

@@ -271,6 +271,26 @@ class FitData:
             warnings.simplefilter("ignore", RuntimeWarning)  # levels no branch reaches
             return np.nanmean(self.branch_values(per_point), axis=1)
 
+    def excitation_at(self, amplitude_m: np.ndarray) -> np.ndarray | None:
+        """``(n, n_orders)`` the measured excitation's harmonics at amplitudes that are not
+        the points (the comparison levels, a plotting grid): each curve's, interpolated in
+        log-amplitude and held at its ends, averaged over the curves. This is the forcing
+        of level-wise predictions, as :attr:`excitation_harmonics` is that of the points'
+        (a shaker's distortion changes with the level it is driven at). None where no
+        curve carries the excitation's harmonics."""
+        if self.excitation_harmonics is None:
+            return None
+        log_a = np.log(np.asarray(amplitude_m, float)).reshape(-1)
+        out = np.zeros((log_a.size, self.excitation_harmonics.shape[1]), dtype=complex)
+        for i in range(self.n_curves):
+            rows = np.flatnonzero(self.curve == i)
+            rows = rows[np.argsort(self.amplitude_m[rows], kind="stable")]
+            known = np.log(self.amplitude_m[rows])
+            for m, ratios in enumerate(self.excitation_harmonics[rows].T):
+                out[:, m] += np.interp(log_a, known, ratios.real)
+                out[:, m] += 1j * np.interp(log_a, known, ratios.imag)
+        return out / self.n_curves
+
     @cached_property
     def curves_at_levels(self) -> np.ndarray:
         """The measured curves at the levels (:meth:`at_levels` of :attr:`values`)."""

@@ -276,13 +276,26 @@ def _checked_free(model: JointModel, free: Sequence[str] | None) -> list[str]:
     return free
 
 
-def natural_coefficient(effect: str, amplitude_m: float, omega: float, stiffness: float) -> float:
-    """Coefficient at which the term's force reaches the linear force ``k·a`` at amplitude ``a``."""
+def natural_coefficient(
+    effect: str, amplitude_m: ArrayLike, omega: float, stiffness: float, **shape: float
+) -> float:
+    """Coefficient at which the term's force reaches the linear force ``k·a``.
+
+    With several amplitudes, at the one where the term is strongest against the linear
+    force (the smallest such coefficient): a Stribeck drop or a saturation is strong at
+    small amplitudes and vanishes at large ones. ``shape``: the term's shape values
+    (default the effect's defaults), which can move where it acts by decades.
+    """
     spec = get_effect(effect)
     theta = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
-    x, v = amplitude_m * np.cos(theta), -amplitude_m * omega * np.sin(theta)
-    peak = np.max(np.abs(spec.feature(x, v, **spec.defaults)))
-    return stiffness * amplitude_m / peak if peak > 0 else 1.0
+    values = {**spec.defaults, **shape}
+    ratios = []
+    for a in np.atleast_1d(np.asarray(amplitude_m, float)):
+        path = spec.feature(a * np.cos(theta), -a * omega * np.sin(theta), **values)
+        peak = np.max(np.abs(path))
+        if peak > 0:
+            ratios.append(stiffness * a / peak)
+    return float(min(ratios)) if ratios else 1.0
 
 
 def fit_scale(model: JointModel, data: FitData) -> FitScale:
@@ -412,8 +425,9 @@ def _scan_coefficient(
 ) -> JointModel:
     """Best coefficient of ``effect`` on a ± log grid, everything else fixed."""
     f = data.values[:, data.column("frequency_hz")]
+    shape = next(t.shape for t in model.terms if t.effect == effect)
     scale = natural_coefficient(
-        effect, data.amplitude_m.max(), 2 * np.pi * np.median(f), _stiffness(model, data)
+        effect, data.amplitude_m.max(), 2 * np.pi * np.median(f), _stiffness(model, data), **shape
     )
     magnitudes = np.geomspace(1e-4, 1.0, 17)
     grid = scale * np.concatenate([-magnitudes[::-1], [0.0], magnitudes])

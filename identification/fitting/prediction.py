@@ -13,9 +13,10 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from identification.analytical.harmonic import backbone
+from identification.analytical.harmonic import EXCITATION_KINDS, backbone
 from identification.effects import CATALOGUE
 from identification.fitting.data import BACKBONE_CHANNELS, HARMONIC_CHANNELS, FitData
+from identification.measurements.quantities import check_choice
 from identification.model import JointModel
 
 __all__ = ["N_HARMONICS", "predict_channels", "resolve_method"]
@@ -55,14 +56,17 @@ def predict_channels(
     parameters: ArrayLike | None = None,
     names: Sequence[str] | None = None,
     excitation_harmonics: ArrayLike | None = None,
+    excitation_kind: str = "base_acceleration",
 ) -> np.ndarray:
     """Model prediction of each channel at the given amplitudes.
 
     ``excitation_harmonics`` (``(n_points, n_orders)``, e.g.
-    :attr:`FitData.excitation_harmonics`) drives each point by the base acceleration
-    its hold measured (``method="multi"``; see
+    :attr:`FitData.excitation_harmonics` or :meth:`FitData.excitation_at`) drives each
+    point by the excitation its hold measured (``method="multi"``; see
     :func:`identification.analytical.harmonic.forcing_rows`); None, or all zero, is
-    the pure sine.
+    the pure sine. ``excitation_kind`` says what those ratios are of: the
+    (equivalent) base acceleration, as extracted backbones carry them for base- and
+    force-driven records alike, or ``"force"`` for the ratios of a force's own signal.
 
     Returns ``(n_points, n_channels)``, or ``(n_sets, n_points, n_channels)`` with
     ``parameters`` (see :func:`identification.analytical.harmonic.backbone`); NaN where the
@@ -73,6 +77,7 @@ def predict_channels(
     if harmonic_channels and method != "multi":
         raise ValueError(f"channels {harmonic_channels} need method='multi'")
     forcing = None
+    check_choice("excitation kind", excitation_kind, EXCITATION_KINDS)
     if excitation_harmonics is not None:
         forcing = np.asarray(excitation_harmonics, dtype=complex).reshape(a.size, -1)
         if not forcing.any():
@@ -85,7 +90,10 @@ def predict_channels(
         rows, inverse = np.unique(keys, axis=0, return_inverse=True)
         unique = rows[:, 0]
         n_orders = forcing.shape[1]
-        shared = {"excitation_harmonics": rows[:, 1 : 1 + n_orders] + 1j * rows[:, 1 + n_orders :]}
+        shared = {
+            "excitation_harmonics": rows[:, 1 : 1 + n_orders] + 1j * rows[:, 1 + n_orders :],
+            "excitation_kind": excitation_kind,
+        }
     result = backbone(
         model, unique, parameters=parameters, names=names, method=method, harmonics=N_HARMONICS,
         **shared,
