@@ -35,6 +35,7 @@ matplotlib.use("Agg")
 
 from identification.sindy import PAPER_LIBRARY
 from pm_joint import pipeline
+from pm_joint.html import surrogate_section
 from pm_joint.workspace import Workspace
 
 SMALL = os.environ.get("PM_JOINT_SIZE") == "small"
@@ -82,7 +83,7 @@ runtime = pipeline.train_surrogate_stage(
     workspace, OUT / "trc_surrogate", labels=labels,
     n_curves=80 if SMALL else 500, max_epochs=20 if SMALL else None, progress=False,
 )  # fmt: skip
-print(runtime.metadata.get("metrics"))
+print(surrogate_section(runtime.metadata, OUT / "trc_surrogate", OUT).text)  # counts, test figures
 
 # %% [markdown]
 # ## 5. Stochastic updating with Metropolis and the PDFs per amplitude level (section 7)

@@ -28,6 +28,7 @@ from identification.measurements.signals import DECAY_EDGE_PERIODS
 from identification.model import PRESETS, JointModel
 from identification.rig import RIG_PRESETS
 from identification.sindy import PAPER_LIBRARY
+from surrogates.labels import MISFIT_POLICIES
 
 # Names only: the samplers and population models are known without importing PyMC.
 SAMPLERS = ("metropolis", "demetropolisz", "nuts", "nutpie")
@@ -211,9 +212,22 @@ def _cmd_train_surrogate(args: argparse.Namespace) -> None:
     with _executor(args) as executor:
         runtime = train_surrogate_stage(
             workspace, args.out, labels=label_records(workspace), n_curves=args.curves,
-            max_epochs=args.epochs, seed=args.seed, executor=executor,
+            n_amplitudes=args.amplitudes, max_epochs=args.epochs,
+            hold_out_measured=not args.measured_in_training, misfit_policy=args.label_misfit,
+            seed=args.seed, executor=executor,
         )  # fmt: skip
     print(f"wrote {args.out}/surrogate.onnx for parameters {', '.join(runtime.parameter_names)}")
+    data, test = runtime.metadata["training"]["data"], runtime.metadata["test"]
+    print(f"curves per origin and split: {data['splits']}")
+    for origin in ("analytical", "measured"):
+        ratios = (test.get(origin) or {}).get("ratios", {}).get("frequency_hz")
+        if ratios:
+            scatter = ratios.get("to_scatter_max")
+            print(
+                f"test ({origin}), frequency: ÷ linear baseline {ratios['to_linear']:.3g}, "
+                "÷ assembly scatter (worst amplitude) "
+                + ("unknown" if scatter is None else f"{scatter:.3g}")
+            )
 
 
 def _cmd_criticize(args: argparse.Namespace) -> None:
@@ -360,6 +374,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="surrogate folder")
     p.add_argument("--curves", type=int, default=500, help="training curves (default 500)")
     p.add_argument("--epochs", type=int, help="epochs per stage (default: the paper-sized run)")
+    p.add_argument(
+        "--amplitudes", type=int, default=41,
+        help="response amplitudes of the grid over the measured range (default 41)",
+    )  # fmt: skip
+    p.add_argument(
+        "--measured-in-training", action="store_true",
+        help="split the measured curves like the analytical ones, as the paper (default: all "
+        "in the test split, so the likelihood's curves are no training data)",
+    )  # fmt: skip
+    p.add_argument(
+        "--label-misfit", choices=MISFIT_POLICIES, default="downweight",
+        help="measured curves whose label misfits them beyond the assembly scatter: "
+        "downweight (default), exclude or keep",
+    )  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     _add_executor_options(
         p, "dask LocalCluster workers computing the dataset (default: serial; the dataset "

@@ -15,7 +15,13 @@ from identification.artifacts import atomic_write_text
 from identification.model import JointModel
 from identification.sindy import PAPER_LIBRARY
 from pm_joint import pipeline
-from pm_joint.html import Section, criticism_section, posterior_sections, write_index
+from pm_joint.html import (
+    Section,
+    criticism_section,
+    posterior_sections,
+    surrogate_section,
+    write_index,
+)
 from pm_joint.workspace import Workspace
 
 
@@ -54,17 +60,9 @@ SIZES = {
 
 #: The SINDy library of the demo: the paper's (every catalogue term but microslip).
 DEMO_LIBRARY = PAPER_LIBRARY
-
-
-def _flat(metrics: dict) -> dict:
-    """One table row of scalar metrics (nested dicts joined by '.')."""
-    row = {}
-    for key, value in metrics.items():
-        if isinstance(value, dict):
-            row.update({f"{key}.{k}": v for k, v in _flat(value).items()})
-        elif isinstance(value, int | float):
-            row[key] = value
-    return row
+#: The surrogate's box: ± this around the identified model, widened to cover every label
+#: (:func:`pm_joint.pipeline.surrogate_box`); the updating's prior is this box.
+SURROGATE_SPREAD = 0.1
 
 
 class _Stages:
@@ -171,23 +169,10 @@ def run_demo(
     workspace.release_records()  # about 1 GB at full size; no later stage reads them from here
     runtime = stages.run(
         "surrogate", pipeline.train_surrogate_stage, workspace, out / "surrogate",
-        labels=labels, n_curves=cfg.surrogate_curves, max_epochs=cfg.surrogate_epochs, seed=0,
+        labels=labels, n_curves=cfg.surrogate_curves, relative_spread=SURROGATE_SPREAD,
+        max_epochs=cfg.surrogate_epochs, seed=0,
     )  # fmt: skip
-    metrics = runtime.metadata.get("metrics", {})
-    stages.sections.append(
-        Section(
-            "Neural surrogate",
-            f"1D-CNN autoencoder + FFNN trained on {cfg.surrogate_curves} curves "
-            f"({len(measured)} measured, labelled by per-curve fits, the rest analytical), "
-            "exported to ONNX and run by onnxruntime.",
-            tables=[("validation metrics", [_flat(metrics)])] if metrics else [],
-            figures=[("surrogate/surrogate_predictions.png", "dataset curves vs surrogate")],
-            files=[
-                ("surrogate/surrogate.onnx", "surrogate.onnx"),
-                ("surrogate/surrogate.json", "surrogate.json"),
-            ],
-        )
-    )
+    stages.sections.append(surrogate_section(runtime.metadata, out / "surrogate", out))
 
     stages.run(
         "stochastic updating", pipeline.update_backbones, workspace, out / "posterior.nc",

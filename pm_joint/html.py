@@ -23,6 +23,7 @@ __all__ = [
     "criticism_section",
     "missing_links",
     "posterior_sections",
+    "surrogate_section",
     "write_index",
 ]
 
@@ -219,6 +220,144 @@ def criticism_section(
             (str(rel / "history.png"), "the error along the loop"),
         ],
         files=[(str(rel / "criticism.json"), "criticism.json")],
+    )
+
+
+#: The value channels of an amplitude-grid surrogate's test figures, as the report names them.
+_GRID_VALUE_CHANNELS = ("frequency_hz", "damping_ratio", "base_acceleration_m_s2")
+
+
+def _ratio_text(value: float | None, limit: float) -> str:
+    if value is None:
+        return "unknown (no figure)"
+    return f"{value:.3g} (target ≤ {limit:g}: {'met' if value <= limit else 'NOT MET'})"
+
+
+def surrogate_section(
+    metadata: Mapping[str, Any], folder: str | os.PathLike, page_folder: str | os.PathLike
+) -> Section:
+    """Section of a trained surrogate from its sidecar (``surrogate.json``) in ``folder``.
+
+    Says how many curves were requested, generated and used for train /
+    validation / test by origin, which measured curves were left out or
+    down-weighted and why, whether the likelihood's curves were training data,
+    and the independent test figures beside the baselines and the assembly
+    scatter, with the acceptance of issue #15 (frequency ≤ 0.1 × scatter at every
+    amplitude, ≤ 0.1 × the linear baseline).
+    """
+    rel = Path(os.path.relpath(folder, page_folder))
+    training, test = metadata["training"], metadata.get("test") or {}
+    data, network = training.get("data", {}), training.get("network", {})
+    counts = data.get("counts", {})
+    splits = data.get("splits", {})
+    measured_curves = data.get("measured_curves", {})
+    excluded = data.get("measured_excluded", {})
+    amplitudes = metadata.get("amplitudes_m") or []
+    used = splits.get("all", {})
+    n_used = sum(used.values())
+    n_named = counts.get("requested", 0) + len(measured_curves) + len(excluded)
+    head = training["config"].get("head_degree", 0)
+    text = [
+        f"Amplitude-grid surrogate: frequency, damping ratio, base acceleration and the "
+        f"has_backbone mask on {len(amplitudes)} response amplitudes"
+        + (f" over {1e3 * amplitudes[0]:.3g}–{1e3 * amplitudes[-1]:.3g} mm" if amplitudes else "")
+        + f"; the paper's network ({network.get('parameters', {}).get('exported', '?')} "
+        "weights)"
+        + (f" on the residual of a degree-{head} regression head" if head else "")
+        + ", exported to ONNX and run by onnxruntime.",
+        f"Curves: {counts.get('requested', 0)} analytical requested, "
+        f"{counts.get('generated', 0)} generated, every one kept "
+        f"({counts.get('curves_with_mask', 0)} with a has_backbone mask somewhere); "
+        f"{len(measured_curves) + len(excluded)} measured offered, {len(measured_curves)} "
+        f"added. Used {n_used} of the {n_named} curves named "
+        f"({100 * n_used / max(n_named, 1):.1f} %).",
+    ]
+    if excluded:
+        text.append(
+            f"Left out: {len(excluded)} measured curves: "
+            + "; ".join(f"{k}: {v}" for k, v in excluded.items())
+            + "."
+        )
+    # A weight acts in training only: a held-out (test) curve is scored whatever its weight.
+    lowered = {k: v for k, v in measured_curves.items() if v["weight"] < 1 and v["split"] != "test"}
+    if lowered:
+        text.append(
+            "Down-weighted (label misfit beyond the threshold, weight (threshold/misfit)²): "
+            + ", ".join(f"{k} ({v['weight']:.2g})" for k, v in lowered.items())
+            + "."
+        )
+    in_training = data.get("measured_in_training", [])
+    text.append(
+        f"{len(in_training)} of the likelihood's measured curves were also training or "
+        "validation data of this surrogate"
+        + (
+            " (hold them out with hold_out_measured=True)."
+            if in_training
+            else ": they were held out, in the test split."
+        )
+    )
+    tables = [
+        (
+            "curves used, by origin and split",
+            [{"origin": origin, **row} for origin, row in splits.items()],
+        )
+    ]
+    for origin in ("analytical", "measured"):
+        part = test.get(origin)
+        if not part:
+            text.append(f"Test split, {origin} curves: none.")
+            continue
+        rows = []
+        for channel in _GRID_VALUE_CHANNELS:
+            models, ratios = part["models"], part["ratios"].get(channel, {})
+            if channel not in models["surrogate"]:
+                continue
+            rows.append(
+                {
+                    "channel": channel,
+                    **{f"RMSE {m}": models[m][channel]["rmse"] for m in models},
+                    "÷ linear": ratios.get("to_linear"),
+                    "÷ scatter (worst amplitude)": ratios.get("to_scatter_max"),
+                    "linear ÷ scatter": ratios.get("linear_to_scatter_max"),
+                }
+            )
+        tables.append((f"independent test split, {part['n_curves']} {origin} curves", rows))
+    analytical = (test.get("analytical") or {}).get("ratios", {}).get("frequency_hz", {})
+    limits = test.get("targets", {})
+    if analytical:
+        text.append(
+            "Acceptance (analytical test curves, frequency): error ÷ assembly scatter at the "
+            f"worst of the {analytical.get('levels_with_scatter')} of {len(amplitudes)} "
+            "amplitudes where at least 3 measured curves give a scatter "
+            + _ratio_text(analytical.get("to_scatter_max"), limits.get("to_scatter_max", 0.1))
+            + "; ÷ the linear baseline's "
+            + _ratio_text(analytical.get("to_linear"), limits.get("to_linear", 0.1))
+            + "."
+        )
+    by_channel = data.get("label_misfit_by_channel", {})
+    rows = [
+        {"curve": k, "split": v["split"], "weight": v["weight"]} for k, v in measured_curves.items()
+    ] + [{"curve": k, "split": "left out", "weight": 0.0} for k in excluded]
+    for row in rows:
+        misfits = by_channel.get(row["curve"]) or {}
+        row.update({f"misfit {c}": misfits.get(c) for c in _GRID_VALUE_CHANNELS})
+    if rows:
+        text.append(
+            "Label misfit: the RMS over a measured curve's amplitudes of (its label's "
+            "backbone − the curve) in assembly standard deviations, per channel; a curve's "
+            "weight follows its frequency misfit."
+        )
+    tables.append(("measured curves: split, loss weight, label misfit", rows))
+    return Section(
+        "Neural surrogate",
+        "\n\n".join(text),
+        tables=tables,
+        figures=[(str(rel / "surrogate_predictions.png"), "test curves vs surrogate")],
+        files=[
+            (str(rel / "surrogate.onnx"), "surrogate.onnx"),
+            (str(rel / "surrogate.json"), "surrogate.json"),
+            (str(rel / "dataset.npz"), "dataset.npz"),
+        ],
     )
 
 

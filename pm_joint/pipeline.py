@@ -17,7 +17,7 @@ import os
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import xarray as xr
@@ -52,13 +52,13 @@ from pm_joint.inference import (
 )
 from pm_joint.report_folder import report
 from pm_joint.workspace import Workspace
-from surrogates.dataset import (
-    add_measured,
-    generate_dataset,
-    reachable_amplitude_range,
-    record_labels,
-)
+from surrogates.dataset import add_measured, generate_dataset, record_labels
+from surrogates.grid import GRID_CHANNELS, assembly_scatter
+from surrogates.labels import MisfitPolicy
 from surrogates.runtime import SurrogateRuntime
+
+if TYPE_CHECKING:
+    from surrogates.train import TrainingConfig
 
 __all__ = [
     "analytical_backbones",
@@ -68,6 +68,7 @@ __all__ = [
     "label_records",
     "posterior_report",
     "run_report",
+    "surrogate_box",
     "train_surrogate_stage",
     "update_backbones",
     "write_rig_campaign",
@@ -269,6 +270,23 @@ def label_records(workspace: Workspace, names: Sequence[str] | None = None) -> n
     return record_labels(workspace.records, model, names or default_free(model))
 
 
+def surrogate_box(
+    model: JointModel,
+    names: Sequence[str],
+    labels: np.ndarray | None = None,
+    relative_spread: float = 0.2,
+) -> np.ndarray:
+    """``(len(names), 2)`` training box: ± ``relative_spread`` around the model's values,
+    widened to cover every label (``(n, len(names))``) by 5 % of its span beyond."""
+    box = parameter_bounds(model, list(names), relative_spread)
+    if labels is not None:
+        labels = np.asarray(labels, dtype=float)
+        margin = 0.05 * (box[:, 1] - box[:, 0])
+        box[:, 0] = np.minimum(box[:, 0], labels.min(axis=0) - margin)
+        box[:, 1] = np.maximum(box[:, 1], labels.max(axis=0) + margin)
+    return box
+
+
 def train_surrogate_stage(
     workspace: Workspace,
     out: str | os.PathLike,
@@ -276,58 +294,81 @@ def train_surrogate_stage(
     labels: np.ndarray | None = None,
     n_curves: int = 500,
     relative_spread: float = 0.2,
+    n_amplitudes: int = 41,
+    config: TrainingConfig | None = None,
     max_epochs: int | None = None,
+    hold_out_measured: bool = True,
+    misfit_threshold: float = 1.0,
+    misfit_policy: MisfitPolicy = "downweight",
     seed: int = 0,
     progress: bool = True,
     executor: Any = None,
 ) -> SurrogateRuntime:
-    """Dataset (analytical + measured curves), training and ONNX export, as the paper.
+    """Amplitude-grid dataset (analytical + measured curves), training and ONNX export.
 
-    ``labels`` are the measured curves' parameters in the order of
-    :func:`identification.fitting.least_squares.default_free` (e.g. :func:`label_records`);
-    without them only analytical curves are used. The training box covers
-    ± ``relative_spread`` around the model and every label. The analytical
-    curves (harmonic balance, inverted onto fixed excitation levels) make up
-    the rest of ``n_curves``. Writes ``out/surrogate.onnx``, its sidecar,
-    ``out/dataset.npz`` and a prediction figure; the workspace's surrogate
-    becomes the exported runtime, which is returned. The dataset's curves are
-    computed on ``executor`` when given (a process pool or a dask Client: the
-    dataset is the serial one, bit for bit).
+    The backbones are sampled on ``n_amplitudes`` response amplitudes geometric
+    over the measured range (:mod:`surrogates.grid`): frequency, damping ratio,
+    base acceleration and the ``has_backbone`` mask, defined for every parameter
+    vector of the box, so no analytical curve is dropped. ``labels`` are the
+    measured curves' parameters in the order of
+    :func:`identification.fitting.least_squares.default_free` (e.g.
+    :func:`label_records`); without them only analytical curves are used. The box
+    covers ± ``relative_spread`` around the model and every label (5 % of the span
+    beyond). Analytical curves make up the rest of ``n_curves``. Each measured
+    curve's label misfit (its label's backbone against the curve, in assembly
+    standard deviations of frequency) is recorded; beyond ``misfit_threshold`` the
+    curve is down-weighted, left out or kept (``misfit_policy``,
+    :mod:`surrogates.labels`). Curves are split 80/10/10 into train, validation
+    (early stopping) and an independent test split, analytical and measured apart;
+    ``hold_out_measured`` (default) puts every measured curve in test, so the
+    likelihood's curves are no training data and the measured test figures are
+    independent: their labels misfit them (the identified model's damping differs
+    from the curves' by tens of assembly SDs), and in validation they would steer
+    the early stopping. False trains on them too, as the paper. ``config``
+    defaults to the paper's network on the residual of a cubic head
+    (:class:`~surrogates.train.TrainingConfig`, ``head_degree=3``); ``max_epochs``
+    caps every stage.
+
+    Writes ``out/surrogate.onnx`` and its sidecar (counts, test figures beside
+    the baselines and the assembly scatter, label misfits), ``out/dataset.npz``
+    and a prediction figure; the workspace's surrogate becomes the exported
+    runtime, which is returned. The dataset's curves are computed on
+    ``executor`` when given (a process pool or a dask Client: the dataset is the
+    serial one, bit for bit).
     """
     # torch only here: `pm-joint update` and the reports never load it.
     from surrogates.export import export_surrogate
-    from surrogates.train import TrainingConfig, train_surrogate
+    from surrogates.train import TrainingConfig, train_on_dataset
 
     out = Path(out)
     model, measured = workspace.model, workspace.backbones
     names = default_free(model)
-    box = parameter_bounds(model, names, relative_spread)
-    n_measured = 0
-    if labels is not None:
-        labels = np.asarray(labels, dtype=float)
-        margin = 0.05 * (box[:, 1] - box[:, 0])
-        box[:, 0] = np.minimum(box[:, 0], labels.min(axis=0) - margin)
-        box[:, 1] = np.maximum(box[:, 1], labels.max(axis=0) + margin)
-        n_measured = len(measured)
-    low, high = reachable_amplitude_range(
-        model,
-        min(b.amplitude_range_m[0] for b in measured),
-        max(b.amplitude_range_m[1] for b in measured),
-    )
+    box = surrogate_box(model, names, labels, relative_spread)
+    n_measured = 0 if labels is None else len(measured)
+    low = min(b.amplitude_range_m[0] for b in measured)
+    high = max(b.amplitude_range_m[1] for b in measured)
+    grid = np.geomspace(low, high, n_amplitudes)
+    scatter = assembly_scatter(measured, grid)
     dataset = generate_dataset(
-        model, names, max(n_curves - n_measured, 1), bounds=box,
-        amplitude_range_m=(low, high), seed=seed, progress=progress, executor=executor,
+        model, names, max(n_curves - n_measured, 1), representation="amplitude_grid",
+        bounds=box, amplitude_range_m=(low, high), n_levels=n_amplitudes, seed=seed,
+        progress=progress, executor=executor,
     )  # fmt: skip
     if labels is not None:
-        dataset = add_measured(dataset, measured, labels)
-    dataset.save(out / "dataset.npz")
-    config = TrainingConfig(seed=seed, progress=progress)
-    if max_epochs is not None:
-        config = TrainingConfig(
-            seed=seed, progress=progress, max_epochs=max_epochs, patience=max_epochs,
-            finetune_epochs=max_epochs // 2,
+        dataset = add_measured(
+            dataset, measured, labels, scatter=scatter, misfit_threshold=misfit_threshold,
+            misfit_policy=misfit_policy,
         )  # fmt: skip
-    surrogate = train_surrogate(dataset.X, dataset.Y, dataset.spec, config)
+    dataset = dataset.with_splits(0.1, 0.1, seed=seed, hold_out_measured=hold_out_measured)
+    dataset.save(out / "dataset.npz")
+    config = config or TrainingConfig(head_degree=3)
+    config = dataclasses.replace(config, seed=seed, progress=progress)
+    if max_epochs is not None:
+        config = dataclasses.replace(
+            config, max_epochs=max_epochs, patience=max_epochs, finetune_epochs=max_epochs // 2
+        )
+    by_channel = dict(zip(GRID_CHANNELS[:3], scatter.T, strict=True))
+    surrogate = train_on_dataset(dataset, config, scatter=by_channel)
     export_surrogate(surrogate, out)
     runtime = SurrogateRuntime.load(out)
     figure = plotting.plot_surrogate_check(runtime, dataset)

@@ -79,7 +79,6 @@ __all__ = [
     "add_measured",
     "generate_dataset",
     "nominal_levels",
-    "reachable_amplitude_range",
     "record_labels",
     "sample_parameters",
 ]
@@ -437,34 +436,6 @@ def nominal_levels(
             f"increasing over {1e3 * low:g}–{1e3 * high:g} mm; pass levels explicitly"
         )
     return levels
-
-
-def reachable_amplitude_range(
-    model: JointModel, low_m: float, high_m: float
-) -> tuple[float, float]:
-    """The part of the amplitudes ``[low_m, high_m]`` a stepped excitation can hold the model at.
-
-    Excitation levels map one-to-one onto amplitudes only while the base
-    acceleration the backbone needs increases with amplitude; past its first
-    maximum a PLL test jumps, so the range ends there (multi-harmonic balance
-    on 200 geometric amplitudes).
-
-    Raises
-    ------
-    ValueError
-        When the range ends before ``1.5 × low_m``.
-    """
-    grid = np.geomspace(low_m, high_m, 200)
-    hb = backbone(model, grid, method="multi")
-    level = np.where(hb.converged, hb.base_acceleration, np.nan)
-    falling = np.flatnonzero(~(np.diff(level) > 0))
-    end = grid[falling[0]] if falling.size else high_m
-    if end <= low_m * 1.5:
-        raise ValueError(
-            f"model {model.name or model.equation()!r}: its backbone needs a base acceleration "
-            f"that does not increase over the measured {1e3 * low_m:.3g}–{1e3 * high_m:.3g} mm"
-        )
-    return low_m, float(end)
 
 
 # ---------------------------------------------------------------------------
@@ -971,8 +942,9 @@ def add_measured(
         raise ValueError(f"level_gain must be finite and > 0, got {level_gain}")
     misfit_weight(math.nan, misfit_threshold, misfit_policy)  # checks the policy's arguments
     on_grid = spec.representation == "amplitude_grid"
+    by_channel: dict[str, dict[str, float]] = {}
     if on_grid:
-        rows = _grid_rows(dataset, curves, values, level_gain, scatter)
+        rows = _grid_rows(dataset, curves, values, level_gain, scatter, by_channel)
     else:
         columns = [_ALL_CHANNELS.index(c) for c in spec.channels]
         rows = []
@@ -1022,6 +994,9 @@ def add_measured(
         record.setdefault("label_misfit", {}).update(
             {k: _json_misfit(v) for k, v in misfits.items()}
         )
+        record.setdefault("label_misfit_by_channel", {}).update(
+            {k: {c: _json_misfit(v) for c, v in m.items()} for k, m in by_channel.items()}
+        )
         record["misfit_policy"] = {"policy": misfit_policy, "threshold": misfit_threshold}
     provenance["counts"]["measured"] = len(record["added"])
     provenance.pop("splits", None)  # the new curves are in no split yet
@@ -1061,10 +1036,12 @@ def _grid_rows(
     labels: np.ndarray,
     level_gain: float | None,
     scatter: ArrayLike | None,
+    by_channel: dict[str, dict[str, float]],
 ) -> list[tuple]:
     """Per curve ``(name, label, row, observed, misfit, reason)`` on the amplitude grid.
 
-    ``reason`` is None for a usable curve, else why it is left out.
+    ``reason`` is None for a usable curve, else why it is left out; ``misfit`` is
+    the frequency's. ``by_channel`` receives every value channel's misfit per curve.
     """
     spec, provenance = dataset.spec, dataset.provenance
     grid = spec.amplitudes_m
@@ -1097,10 +1074,14 @@ def _grid_rows(
             reason = "it covers fewer than two amplitudes of the grid"
             rows.append((curve.label, label, None, None, math.nan, reason))
             continue
-        misfit = label_misfit(
-            values[:, 0], observed, label_backbone[:, frequency],
-            label_backbone[:, mask] >= 0.5, scatter[:, 0],
-        )  # fmt: skip
+        exists = label_backbone[:, mask] >= 0.5
+        by_channel[curve.label] = {
+            channel: label_misfit(
+                values[:, j], observed, label_backbone[:, j], exists, scatter[:, j]
+            )
+            for j, channel in enumerate(GRID_CHANNELS[:3])
+        }
+        misfit = by_channel[curve.label][GRID_CHANNELS[frequency]]
         row = label_backbone.copy()
         row[observed, :3] = values[observed]
         row[observed, mask] = 1.0

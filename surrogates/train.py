@@ -414,6 +414,7 @@ def train_on_dataset(
         validation_index=np.arange(train.size, rows.size),
     )  # fmt: skip
     measured = dataset.is_measured
+    misfit_by_channel = dataset.provenance.get("measured", {}).get("label_misfit_by_channel", {})
     surrogate.data = {
         "dataset_sha256": dataset.content_hash,
         "counts": dataset.provenance.get("counts", {}),
@@ -426,6 +427,24 @@ def train_on_dataset(
             for o in dataset.origin[measured & (dataset.partition == "test")]
         ],
         "measured_excluded": dataset.provenance.get("measured", {}).get("excluded", {}),
+        # Per measured curve: its split, loss weight and label misfit (assembly SDs) in
+        # frequency, which the weight follows.
+        "measured_curves": {
+            str(o).removeprefix(MEASURED_PREFIX): {
+                "split": str(split),
+                "weight": float(weight),
+                "label_misfit": float(misfit) if math.isfinite(misfit) else None,
+            }
+            for o, split, weight, misfit in zip(
+                dataset.origin[measured],
+                dataset.partition[measured],
+                dataset.weight[measured],
+                dataset.label_misfit[measured],
+                strict=True,
+            )
+        },
+        # Every offered curve's label misfit in each value channel (assembly SDs).
+        "label_misfit_by_channel": misfit_by_channel,
     }
     surrogate.test_report = accuracy_report(dataset, surrogate.predict, scatter=scatter)
     return surrogate

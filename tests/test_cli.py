@@ -184,6 +184,23 @@ def test_rig_campaign_through_every_stage(rig_campaign, tmp_path, capsys):
     argv = ["train-surrogate", str(rig_campaign), "--model", str(model), "--out", str(surrogate)]
     assert main([*argv, "--curves", "80", "--epochs", "40"]) == 0
     assert (surrogate / "surrogate.onnx").exists()
+    # The amplitude grid: every analytical curve requested is generated and used, the
+    # measured curves are added or named as left out, and the sidecar carries the
+    # independent test split's figures beside the linear baseline.
+    dataset = BackboneDataset.load(surrogate / "dataset.npz")
+    counts, offered = dataset.provenance["counts"], 3
+    assert dataset.spec.representation == "amplitude_grid"
+    assert counts["requested"] == counts["generated"] == 80 - offered
+    left_out = dataset.provenance["measured"]["excluded"]
+    assert counts["measured"] + len(left_out) == offered
+    assert len(dataset) == counts["generated"] + counts["measured"]
+    assert sum(dataset.split_counts()["all"].values()) == len(dataset)
+    sidecar = json.loads((surrogate / "surrogate.json").read_text())
+    assert sidecar["test"]["analytical"]["n_curves"] == dataset.split_counts()["analytical"]["test"]
+    assert sidecar["test"]["analytical"]["ratios"]["frequency_hz"]["to_linear"] is not None
+    assert set(sidecar["training"]["data"]["measured_curves"]) == {
+        o.removeprefix("measured:") for o in dataset.origin[dataset.is_measured]
+    }
     # On a two-worker dask LocalCluster the dataset is the serial one, bit for bit.
     on_dask = tmp_path / "surrogate_dask"
     argv_dask = [*argv[:-1], str(on_dask), "--curves", "80", "--epochs", "1", "--workers", "2"]

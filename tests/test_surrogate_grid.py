@@ -317,6 +317,16 @@ def test_the_exported_grid_surrogate_carries_its_test_figures(trained, tmp_path)
     assert network["head_degree"] == 3
     assert network["parameters"]["exported"] == sum(p.numel() for p in surrogate.model.parameters())
     assert sidecar["training"]["data"]["measured_in_training"] == []
+    # The report's section says what the sidecar holds: counts used and the acceptance.
+    from pm_joint.html import surrogate_section
+
+    section = surrogate_section(sidecar, tmp_path / "surrogate", tmp_path)
+    assert f"Used {len(data)} of the {len(data)} curves named (100.0 %)" in section.text
+    ratios = sidecar["test"]["analytical"]["ratios"]["frequency_hz"]
+    verdict = "met" if ratios["to_linear"] <= 0.1 else "NOT MET"
+    assert f"linear baseline's {ratios['to_linear']:.3g} (target ≤ 0.1: {verdict})" in section.text
+    assert "0 of the likelihood's measured curves were also training" in section.text
+    assert "worst of the" in section.text  # says over how many amplitudes the scatter is known
 
 
 def test_the_likelihood_sees_the_mask_as_a_probability_not_nan(trained, tmp_path):
@@ -324,7 +334,7 @@ def test_the_likelihood_sees_the_mask_as_a_probability_not_nan(trained, tmp_path
     import pytensor.tensor as pt
 
     from pm_joint.forward import SurrogateOp
-    from pm_joint.inference import build_model
+    from pm_joint.inference import amplitudes_within_surrogate, build_model
 
     data, surrogate = trained
     runtime = SurrogateRuntime.load(export_surrogate(surrogate, tmp_path / "surrogate"))
@@ -348,6 +358,10 @@ def test_the_likelihood_sees_the_mask_as_a_probability_not_nan(trained, tmp_path
     )
     pm_model = build_model(None, curves, forward="surrogate", surrogate=runtime)
     low, high = curves.common_range()
+    # The likelihood's levels for a grid surrogate: where both the grid and the curves are.
+    levels_m = amplitudes_within_surrogate(curves, runtime)
+    grid = runtime.amplitudes_m
+    assert levels_m[0] >= max(low, grid[0]) and levels_m[-1] <= min(high, grid[-1])
     inside = (runtime.amplitudes_m >= low) & (runtime.amplitudes_m <= high)
     masked_inside = mask[:, inside].sum(axis=1)
     assert masked_inside.max() >= 3

@@ -254,13 +254,18 @@ def _pll_excitation_levels(
 def amplitudes_within_surrogate(measured: BackboneSet, runtime: SurrogateRuntime) -> np.ndarray:
     """Likelihood levels (m) over the amplitudes both the measurements and the surrogate cover.
 
-    The surrogate's range is that of its prediction at the centre of its
-    training box; a model that cannot be held at the largest measured
-    amplitudes (its excitation would have to fall) is compared where it can.
-    As many levels as :func:`~pm_joint.distributions.amplitude_levels` gives.
+    An amplitude-grid surrogate covers its grid for every parameter vector (its
+    mask channel says where a backbone exists, which the likelihood scores). On
+    excitation levels the surrogate's range is that of its prediction at the
+    centre of its training box; a model that cannot be held at the largest
+    measured amplitudes (its excitation would have to fall) is compared where it
+    can. As many levels as :func:`~pm_joint.distributions.amplitude_levels` gives.
     """
-    centre = np.mean(np.asarray(runtime.bounds, dtype=float), axis=1)
-    amplitude = runtime.amplitude_m(centre)
+    if runtime.amplitudes_m is not None:
+        amplitude = runtime.amplitudes_m
+    else:
+        centre = np.mean(np.asarray(runtime.bounds, dtype=float), axis=1)
+        amplitude = runtime.amplitude_m(centre)
     low, high = measured.common_range()
     low, high = max(low, float(np.min(amplitude))), min(high, float(np.max(amplitude)))
     levels = amplitude_levels(measured)
