@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import pymc as pm
 import xarray as xr
+import zarr
 from pymc.backends.arviz import coords_and_dims_for_inferencedata, find_constants, find_observations
 from pymc.backends.ndarray import NDArray
 
@@ -201,6 +202,25 @@ def _meta(folder: Path) -> dict:
     return meta
 
 
+def _read_steps(folder: Path, chain: int, steps: slice) -> xr.Dataset:
+    """One chain's ``steps``. A run killed in the middle of an append leaves variables of
+    different lengths on disk, which xarray refuses to open as one dataset: then each variable
+    is opened alone and cut to ``steps`` (all of them hold at least the steps the chain's
+    progress file counts, which is written after the append)."""
+    group = f"chain_{chain}"
+    try:
+        with xr.open_zarr(folder, group=group, consolidated=False) as store:
+            return store.isel(draw=steps).load()
+    except ValueError:
+        names = list(zarr.open_group(folder / group, mode="r").array_keys())
+    parts = []
+    for name in names:
+        others = [other for other in names if other != name]
+        with xr.open_zarr(folder, group=group, consolidated=False, drop_variables=others) as one:
+            parts.append(one.isel(draw=steps, missing_dims="ignore").load())
+    return xr.merge(parts)
+
+
 def read_trace(folder: str | os.PathLike) -> xr.DataTree:
     """The posterior draws of a trace folder (:class:`DrawWriter`), as a DataTree.
 
@@ -221,8 +241,7 @@ def read_trace(folder: str | os.PathLike) -> xr.DataTree:
     n_draws = min(written) - tune
     parts, elapsed = [], []
     for chain in range(chains):
-        with xr.open_zarr(folder, group=f"chain_{chain}", consolidated=False) as store:
-            parts.append(store.isel(draw=slice(tune, tune + n_draws)).load())
+        parts.append(_read_steps(folder, chain, slice(tune, tune + n_draws)))
         progress = json.loads((folder / f"chain_{chain}.json").read_text(encoding="utf-8"))
         elapsed.append(progress["elapsed_s"])
     joined = xr.concat(parts, dim="chain").assign_coords(
