@@ -145,9 +145,20 @@ def table5(results: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
+def run_line(run: dict) -> str:
+    """How a result file was made: date, seconds (when run_all timed it), machine, command."""
+    parts = [run["date"]]
+    if "seconds" in run:
+        parts.append(f"{run['seconds']} s")
+    parts.append(run["machine"])
+    if "command" in run:
+        parts.append(f"`{run['command']}`")
+    return ", ".join(parts)
+
+
 def write_tables(results: dict[str, dict]) -> None:
     runs = "\n".join(
-        f"- `bench/{name}.py`: {run['date']}, {run['seconds']} s, {run['machine']}"
+        f"- `{name}.json`: {run_line(run)}"
         for name, run in ((n, r["_run"]) for n, r in results.items() if "_run" in r)
     )
     headline = headline_table(results)
