@@ -283,6 +283,7 @@ def test_surrogate_graph_equals_onnxruntime(tiny):
     assert np.isnan(graph[..., 2]).all()
 
 
+@pytest.mark.slow  # 50 s, mostly nutpie's compile
 def test_surrogate_graph_forward_model_equals_the_onnxruntime_op_and_nutpie_runs_on_it(tiny):
     """The native graph is what gradient samplers compile: same values as the Op (float32
     rounding apart), same parameter order, and nutpie's numba backend samples through it."""

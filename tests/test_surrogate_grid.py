@@ -329,6 +329,7 @@ def test_the_exported_grid_surrogate_carries_its_test_figures(trained, tmp_path)
     assert "worst of the" in section.text  # says over how many amplitudes the scatter is known
 
 
+@pytest.mark.slow  # 160 s (the likelihood graph through the ONNX Op); the demo test covers the mask
 def test_the_likelihood_sees_the_mask_as_a_probability_not_nan(trained, tmp_path):
     import pymc as pm
     import pytensor.tensor as pt
