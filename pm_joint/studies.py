@@ -204,16 +204,42 @@ class StudyResult:
         return self.verdict not in ("nothing missing", "drift")
 
     @property
-    def passed(self) -> bool:
+    def start_adequate(self) -> bool:
+        """Hidden scenarios: the start lacks a hidden effect by name (not :attr:`in_start`),
+        yet its first criticism is :attr:`~identification.criticism.criticism.Criticism.adequate`
+        — nothing significant, and the refitted start's residual within the calibrated
+        scatter in every channel group, the same test a proposed candidate must pass. The
+        start's own terms reproduce the hidden effect on these data (e.g. SINDy's x², x³
+        and ẋ² terms an exponential spring): it is not missing from this start, so the row
+        is neither a hit nor a miss."""
+        if self.kind != "hidden" or self.in_start:
+            return False
+        return self.criticisms[0].adequate
+
+    @property
+    def outcome(self) -> str | None:
+        """Hidden scenarios: ``"hit"`` (:attr:`passed`), ``"start adequate"``
+        (:attr:`start_adequate`) or ``"miss"``; None for other kinds."""
+        if self.kind != "hidden":
+            return None
+        if self.start_adequate:
+            return "start adequate"
+        return "hit" if self.passed else "miss"
+
+    @property
+    def passed(self) -> bool | None:
         """Null: nothing found. Hidden: :attr:`hit` (or already in the start) and the key
         channel's error down ≥ 80 %; when the start holds every hidden effect already, the
         loop adds only effects of the truth (SINDy may miss another one, e.g. the viscous
-        term beside ẋ³) and ends with nothing significant. Out of catalogue: "not explained
+        term beside ẋ³) and ends with nothing significant; None (not judged) when the start
+        is adequate without it (:attr:`start_adequate`). Out of catalogue: "not explained
         by the catalogue" or "partly explained" (proposals are admissible by construction)."""
         if self.kind == "null":
             return not self.false_discovery
         if self.kind == "out of catalogue":
             return self.verdict in ("not explained by the catalogue", "partly explained")
+        if self.start_adequate:
+            return None
         if self.in_start:
             return all(e in self.truth for e in self.added) and not (
                 self.criticisms[-1].significant
@@ -240,6 +266,8 @@ class StudyResult:
             "groups": groups,
             "added": self.added,
             "in_start": self.in_start,
+            "start_adequate": self.start_adequate,
+            "beyond_scatter": list(first.beyond_scatter),
             "hit": self.hit,
             "frequency_rmse_hz": [c.base.frequency_rmse_hz for c in self.criticisms],
             "damping_rmse": [c.base.damping_rmse for c in self.criticisms],
@@ -248,6 +276,7 @@ class StudyResult:
             "key_channel": KEY_CHANNEL.get(self.scenario),
             "drift": [d.channel for d in first.drift if d.significant],
             "passed": self.passed,
+            "outcome": self.outcome,
             "seconds": self.seconds,
         }
 
