@@ -561,15 +561,18 @@ def test_a_start_that_reproduces_the_hidden_effect_is_start_adequate():
 def test_lab_exponential_from_sindy_is_start_adequate(seed):
     """The lab study's rows: SINDy's x², x³ and ẋ² reproduce the hidden exponential on
     these campaigns, checked against the rig's truth: the shape of the start's backbone
-    and of the truth's (harmonic balance, no rig; each less its value at the lowest level,
+    and of the truth's (multi-harmonic balance, no rig; each less its value at the lowest level,
     as assemblies differ in their offset) differ by less than two standard errors of the
     measured mean at every level."""
     result = study("lab-hidden-exponential", seed, "sindy")
     assert result.outcome == "start adequate", result.row()
     crit = result.criticisms[0]
     levels = crit.data.levels_m
-    truth = harmonic_backbone(result.truth, levels).frequency_hz
-    start = harmonic_backbone(crit.base.model, levels).frequency_hz
+    # harmonics 0..5: the exponential's even part moves the frequency through the mean and
+    # the 2nd harmonic, which a single-harmonic balance leaves out (0.4 Hz at 1.9 mm)
+    truth = harmonic_backbone(result.truth, levels, method="multi").frequency_hz
+    start = harmonic_backbone(crit.base.model, levels, method="multi").frequency_hz
     _, se = crit.residual("frequency_hz")
     shape = (truth - truth[0]) - (start - start[0])
     assert np.all(np.abs(shape) < 2 * se), (shape, se)
+    assert result.truth_gap < 2, result.row()  # every channel, the study's own figure
