@@ -35,10 +35,14 @@ channel, and the share of the reference's gain they capture
 "explained" (adequate, share ≥ :data:`EXPLAINED`), "partly explained" (share ≥
 :data:`PARTLY`), "not explained by the catalogue", or "nothing missing"; a candidate
 that improves the fit without being admissible or adequate is listed as "improves
-the fit but does not explain it" and never proposed. Candidates whose signatures the
-data cannot separate form **groups** (a ranking inside a group is not a finding),
-with what would separate them. Up- and down-stepped branches that differ by time,
-not amplitude, are reported as **drift** (:mod:`identification.criticism.drift`).
+the fit but does not explain it" and never proposed. A slip element of which the test
+holds only the onset (its damping peak, at twice the slip amplitude, above the top level)
+is at most "partly explained" and grouped with a nearby mode outside the catalogue, which
+one sensor cannot tell from it (:func:`~identification.criticism.adequacy.onset_only`).
+Candidates whose signatures the data cannot separate form **groups** (a ranking inside
+a group is not a finding), with what would separate them. Up- and down-stepped branches
+that differ by time, not amplitude, are reported as **drift**
+(:mod:`identification.criticism.drift`).
 
 Figures are drawn by :mod:`identification.criticism.plots`; posterior draws from
 PyMC come in through ``pm_joint``'s adapter (this engine imports no PyMC).
