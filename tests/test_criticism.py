@@ -10,11 +10,14 @@ import numpy as np
 import pytest
 import xarray as xr
 from oscillators import measured_curve
+from scipy.special import i1
 
 from identification.analytical.harmonic import backbone as harmonic_backbone
+from identification.criticism.adequacy import NEARBY_MODE, onset_only
 from identification.criticism.criticism import criticize
 from identification.criticism.directions import base_jacobian
 from identification.criticism.plots import plot_history
+from identification.effects import jenkins_path
 from identification.fitting.prediction import predict_channels
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
@@ -25,7 +28,7 @@ from identification.rig import (
     LAB_OUT_OF_CATALOGUE_SCENARIOS,
 )
 from pm_joint.analysis.posterior import criticize as criticize_posterior
-from pm_joint.studies import KEY_CHANNEL, criticism_study
+from pm_joint.studies import KEY_CHANNEL, StudyResult, criticism_study, simulated_campaign
 
 W0 = 2 * np.pi * 101.0
 K0 = W0**2
@@ -385,6 +388,9 @@ def test_microslip_reading_is_specific():
     assert best.effect == "microslip"
     assert "frequency softening" in best.reading
     assert "damping rising" in best.reading and "consistent with partial slip" in best.reading
+    # slip from 0.2 mm, tested to 2 mm: the damping's peak and fall are in the data, so a
+    # nearby mode is not offered as an alternative (that would be a false ambiguity)
+    assert not best.alternative and "nearby mode" not in best.reading, best.reading
 
 
 def test_quadratic_stiffness_needs_the_records():
@@ -421,8 +427,13 @@ def test_lab_hidden_effect_from_what_users_start_from(scenario, start, seed):
     linear-viscous start and from SINDy's polynomial model: ranked first, or in a
     flagged group that holds it, with only the truth's effects added before, and the
     key channel's error down by 80 % once it is added (or already in the start, and
-    then nothing significant is left)."""
+    then nothing significant is left). A start that lacks it by name but is adequate
+    without it is not judged; the rig's truth must then be within the where-bound of the
+    refitted start at every level."""
     result = study(scenario, seed, start)
+    if result.outcome == "start adequate":
+        assert result.truth_gap < result.criticisms[0].calibration.where_bound, result.row()
+        return
     assert result.passed, result.row()
 
 
@@ -464,3 +475,126 @@ def test_out_of_catalogue_physics_is_not_explained_as_physics(scenario, start):
     crit = result.criticisms[0]
     assert crit.verdict in ("not explained by the catalogue", "partly explained"), crit.summary()
     assert all(not c.problems for c in crit.missing())
+
+
+# --------------------------------------------------------------------------
+# What one sensor cannot tell apart, and a start that already reproduces the effect
+
+
+def test_a_slip_fit_is_identified_only_past_its_damping_peak():
+    """The premise of ``onset_only``, from the element's own hysteresis loop (time domain,
+    not the catalogue's describing function): a Jenkins element's dissipated energy per
+    cycle over a², i.e. its added damping ratio, peaks at twice the slip amplitude
+    (4 F_s (a − a_s)/a² is largest at 2 a_s). The rule fires exactly when the test stops
+    below that peak."""
+    k_t, slip = 3e3, 1e-3
+    amplitudes = slip * np.linspace(1.05, 4.0, 60)
+    theta = np.linspace(0, 4 * np.pi, 8001)
+    loss = []
+    for a in amplitudes:
+        x = a * np.sin(theta)
+        force = jenkins_path(x, k_t, k_t * slip)
+        half = theta.size // 2  # the second cycle: the loop is closed
+        loss.append(np.trapezoid(force[half:], x[half:]) / a**2)
+    peak = amplitudes[int(np.argmax(loss))]
+    assert peak == pytest.approx(2 * slip, rel=0.03)
+    model = linear(microslip={"coefficient": 1.0, "k_t": k_t, "F_s": k_t * slip})
+    below = onset_only(model, 1e-3 * np.geomspace(0.05, 1.5, 8))
+    assert below is not None and "onset of slip" in below and "2 mm" in below
+    assert onset_only(model, 1e-3 * np.geomspace(0.05, 2.5, 8)) is None
+    assert onset_only(linear(cubic_stiffness=1.4e10), AMPS) is None
+
+
+def test_a_second_mode_is_not_explained_as_microslip():
+    """The rig's ground truth: cubic hardening and a second mode 5 % above the first, no
+    slip. The catalogue's Jenkins element fits the damping that rises at the top of the
+    range (slip from about 0.9 mm, tested to 1.4 mm), which is only its onset, so the
+    verdict is not "explained": microslip and a nearby mode form a group, and the reading
+    says what would separate them. (Seed 1 was "explained by microslip" before.)"""
+    result = study("lab-second-mode", 1)
+    assert "microslip" not in result.truth
+    crit = result.criticisms[0]
+    assert crit.verdict == "partly explained" and crit.unexplained, crit.summary()
+    best = crit.missing()[0]
+    assert best.effect == "microslip" and best.status == "partly explained"
+    assert "nearby mode" in best.reading and "second response point" in best.alternative
+    assert any(set(g.effects) == {"microslip", NEARBY_MODE} for g in crit.groups)
+    report = crit.to_dict()
+    assert report["ranking"][0]["alternative"] == best.alternative
+    assert "not identified" in report["verdict_text"]
+
+
+def _exponential_campaign():
+    """An exponential spring c(e^{x/x_s} − 1) with x_s = 5 mm hidden in a linear joint
+    (its stiffness at rest taken out of the linear one, as the rig's presets do), and
+    the describing function's expansion 2 I₁(z)/a = (1 + z²/8 + z⁴/192 + …)/x_s."""
+    x_s, share = 5e-3, 0.2
+    c = share * K0 * x_s
+    truth = linear(linear_stiffness=K0 - c / x_s, exponential={"coefficient": c, "x_s": x_s})
+    z = AMPS / x_s
+    k_eq = K0 - c / x_s + c * 2 * i1(z) / AMPS
+    cubic = K0 + c / x_s * z**2 / 8  # what x³ gives: ¾ k₃ a² with k₃ = c/(6 x_s³)
+    hz = lambda k: np.sqrt(k) / (2 * np.pi)  # noqa: E731
+    return truth, population(truth, seed=4), hz(k_eq) - hz(cubic), hz(cubic) - hz(K0)
+
+
+def test_a_start_that_reproduces_the_hidden_effect_is_start_adequate():
+    """Ground truth: beyond x³ the exponential's describing function moves the frequency
+    by ≤ 0.003 Hz over the test (the measurement noise), while x³ itself moves it by
+    0.2 Hz. A start with x² and x³ (SINDy's polynomial) is adequate by the criticism's
+    own test, and the study calls that row "start adequate" (neither hit nor miss); a
+    bare linear start is not adequate."""
+    truth, measured, beyond_cubic, cubic_shift = _exponential_campaign()
+    assert np.abs(beyond_cubic).max() < 0.003 < 0.1 < cubic_shift.max()
+    polynomial = linear(quadratic_stiffness=0.0, cubic_stiffness=1e9)
+    crit = criticize(polynomial, measured)
+    assert crit.adequate and crit.beyond_scatter == (), crit.summary()
+    assert crit.to_dict()["adequate"] is True
+    row = StudyResult("lab-hidden-exponential", 0, "sindy", truth, ("exponential",), measured,
+                      [], polynomial, [crit])  # fmt: skip
+    assert not row.in_start and row.start_adequate
+    assert row.outcome == "start adequate" and row.passed is None
+    assert row.row()["outcome"] == "start adequate"
+    bare = criticize(linear(), measured)
+    assert not bare.adequate and "frequency_hz" in bare.beyond_scatter, bare.summary()
+    assert not StudyResult("lab-hidden-exponential", 0, "linear", truth, ("exponential",),
+                           measured, [], linear(), [bare]).start_adequate  # fmt: skip
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(3))
+def test_lab_exponential_from_sindy_is_start_adequate(seed):
+    """The lab study's rows: SINDy's x², x³ and ẋ² reproduce the hidden exponential on
+    these campaigns, checked against the rig's truth: the shape of the start's backbone
+    and of the truth's (multi-harmonic balance, no rig; each less its value at the lowest level,
+    as assemblies differ in their offset) differ by less than two standard errors of the
+    measured mean at every level."""
+    result = study("lab-hidden-exponential", seed, "sindy")
+    assert result.outcome == "start adequate", result.row()
+    crit = result.criticisms[0]
+    levels = crit.data.levels_m
+    # harmonics 0..5: the exponential's even part moves the frequency through the mean and
+    # the 2nd harmonic, which a single-harmonic balance leaves out (0.4 Hz at 1.9 mm)
+    truth = harmonic_backbone(result.truth, levels, method="multi").frequency_hz
+    start = harmonic_backbone(crit.base.model, levels, method="multi").frequency_hz
+    _, se = crit.residual("frequency_hz")
+    shape = (truth - truth[0]) - (start - start[0])
+    assert np.all(np.abs(shape) < 2 * se), (shape, se)
+    assert result.truth_gap < 2, result.row()  # every channel, the study's own figure
+
+
+@pytest.mark.parametrize(("onset_mm", "identified"), [(0.2, True), (0.9, False)])
+def test_true_slip_is_identified_only_when_the_test_passes_its_damping_peak(onset_mm, identified):
+    """The trade-off of the onset rule, on true slip (harmonic-balance campaigns of cubic
+    hardening plus a Jenkins element carrying 3 % of the stiffness, tested to 1.5 mm):
+    slip from 0.2 mm peaks in damping at 0.4 mm, inside the test, and is explained; slip
+    from 0.9 mm peaks at 1.8 mm, beyond it, and is grouped with a nearby mode although it
+    is slip — the data hold only its onset."""
+    k_t = 0.03 * K0
+    slip = {"coefficient": 1.0, "k_t": k_t, "F_s": k_t * 1e-3 * onset_mm}
+    truth = linear(linear_stiffness=K0 - k_t, cubic_stiffness=1.4e10, microslip=slip)
+    measured = simulated_campaign(truth, 3, seed=1, levels=8, amplitude_range_mm=(0.05, 1.5))
+    crit = criticize(linear(cubic_stiffness=1.4e10), measured)
+    assert crit.missing()[0].effect == "microslip", crit.summary()
+    nearby = any(NEARBY_MODE in g.effects for g in crit.groups)
+    assert (crit.verdict == "explained") == identified and nearby != identified, crit.summary()

@@ -19,6 +19,11 @@ coefficients must describe a joint a resonance test could have measured
   against each other (a 4× linear stiffness cancelled by a large tanh) and none of
   them reads as physics;
 * a periodic solution at every level (:func:`no_solution`, in words).
+
+An admissible, adequate fit may still not identify its physics: a Jenkins element
+whose slip starts so high in the test that the data never reach its damping peak
+shows only that something starts taking energy near the top of the range, which a
+nearby mode the backbone approaches does as well (:func:`onset_only`).
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ import numpy as np
 from identification.effects import CATALOGUE
 from identification.model import JointModel
 
-__all__ = ["CANCELLATION", "admissibility", "no_solution"]
+__all__ = ["CANCELLATION", "NEARBY_MODE", "admissibility", "no_solution", "onset_only"]
 
 #: Ratio of the sum of absolute term contributions to their net sum beyond which the
 #: terms are said to cancel (a physical softening-then-hardening joint stays near 1).
@@ -127,3 +132,37 @@ def _negative_at_rest(model: JointModel, smallest_m: float, omega: float) -> lis
                 "a spring pushing away from equilibrium, made up for by a stiffer structure"
             )
     return out
+
+
+#: The physics outside the catalogue that an onset-only fit cannot be told from.
+NEARBY_MODE = "a nearby mode (outside the catalogue)"
+
+
+def onset_only(model: JointModel, levels_m: np.ndarray) -> str | None:
+    """Why a fitted ``microslip`` term shows only its onset on these data, in words
+    (None where the data reach what identifies slip, or the model has no such term).
+
+    A Jenkins element's added damping ratio goes as ``(a − a_s)/a²`` above its slip
+    amplitude ``a_s = F_s/k_t``: it peaks at ``2 a_s`` and falls back as partial slip
+    turns into macroslip, while the stiffness it removes saturates at ``k_t``. That
+    rise and fall (Masing hysteresis) is what identifies slip. Where the top tested
+    level is below ``2 a_s`` the data show only a dissipation (and softening) that
+    starts near the top of the range and is still rising there. A second mode that the
+    backbone approaches as its frequency moves does the same from one sensor: the
+    energy it takes grows as the detuning shrinks, and it pushes the backbone's
+    frequency away (flattening it). Which of the two it is needs another measurement,
+    not a better fit: a second response point or the mode shape (a second mode has its
+    own shape and resonance), or levels beyond ``2 a_s`` where slip's damping must fall.
+    """
+    if "microslip" not in model:
+        return None
+    term = next(t for t in model.terms if t.effect == "microslip")
+    slip = term.shape["F_s"] / term.shape["k_t"]
+    top = float(levels_m[-1])
+    if top >= 2 * slip:
+        return None
+    return (
+        f"the data show only the onset of slip: the fitted slip amplitude {1e3 * slip:.2g} mm "
+        f"is above half the top level ({1e3 * top:.2g} mm), so the damping peak at "
+        f"{2e3 * slip:.2g} mm, beyond which slip's damping must fall back, is not in the test"
+    )

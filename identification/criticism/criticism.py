@@ -35,10 +35,14 @@ channel, and the share of the reference's gain they capture
 "explained" (adequate, share ≥ :data:`EXPLAINED`), "partly explained" (share ≥
 :data:`PARTLY`), "not explained by the catalogue", or "nothing missing"; a candidate
 that improves the fit without being admissible or adequate is listed as "improves
-the fit but does not explain it" and never proposed. Candidates whose signatures the
-data cannot separate form **groups** (a ranking inside a group is not a finding),
-with what would separate them. Up- and down-stepped branches that differ by time,
-not amplitude, are reported as **drift** (:mod:`identification.criticism.drift`).
+the fit but does not explain it" and never proposed. A slip element of which the test
+holds only the onset (its damping peak, at twice the slip amplitude, above the top level)
+is at most "partly explained" and grouped with a nearby mode outside the catalogue, which
+one sensor cannot tell from it (:func:`~identification.criticism.adequacy.onset_only`).
+Candidates whose signatures the data cannot separate form **groups** (a ranking inside
+a group is not a finding), with what would separate them. Up- and down-stepped branches
+that differ by time, not amplitude, are reported as **drift**
+(:mod:`identification.criticism.drift`).
 
 Figures are drawn by :mod:`identification.criticism.plots`; posterior draws from
 PyMC come in through ``pm_joint``'s adapter (this engine imports no PyMC).
@@ -59,7 +63,7 @@ from numpy.typing import ArrayLike
 
 from identification.artifacts import atomic_write_text
 from identification.criticism import calibration as cal
-from identification.criticism.adequacy import admissibility, no_solution
+from identification.criticism.adequacy import NEARBY_MODE, admissibility, no_solution, onset_only
 from identification.criticism.directions import (
     base_jacobian,
     candidate_directions,
@@ -215,6 +219,10 @@ class Candidate:
         Per channel at the levels: the mean prediction with the effect minus without it.
     reading
         What it does in this test and what it is consistent with (:mod:`.readings`).
+    alternative
+        Why physics outside the catalogue fits as well, in words (empty: nothing said):
+        a slip element whose onset alone is in the test
+        (:func:`~identification.criticism.adequacy.onset_only`) is never "explained".
     """
 
     effect: str
@@ -234,6 +242,7 @@ class Candidate:
     status: str = "not significant"
     signature: dict[str, np.ndarray] = field(default_factory=dict)
     reading: str = ""
+    alternative: str = ""
 
     @property
     def proposed(self) -> bool:
@@ -283,6 +292,7 @@ class Candidate:
             "delta_information_criterion": self.delta_ic,
             "criterion": self.criterion,
             "reading": self.reading,
+            "alternative": self.alternative,
             "rmse_before": {k: b for k, b, _ in pairs},
             "rmse_after": {k: a for k, _, a in pairs},
             "parameters": self.fit.model.parameters,
@@ -682,6 +692,22 @@ class Criticism:
         fires = self.fires
         return (fires["catalogue"] or fires["reference"]) and fires["where"]
 
+    @cached_property
+    def beyond_scatter(self) -> tuple[str, ...]:
+        """Channel groups where the refitted base model's post-fit ``χ²`` exceeds its
+        calibrated bound: the adequacy test a candidate must pass (``Candidate.beyond``),
+        applied to the model criticised."""
+        bounds = self.calibration.channel_bounds
+        chi2 = self._channel_chi2(self.base)
+        return tuple(g for g in chi2 if chi2[g] > bounds.get(g, np.inf))
+
+    @property
+    def adequate(self) -> bool:
+        """Nothing is missing and the refitted model's residual is within the calibrated
+        scatter in every channel group: whatever physics the truth holds, this model's
+        terms already reproduce what the data show of it."""
+        return not self.significant and not self.beyond_scatter
+
     # ---------------------------------------------------------------- missing
     def _extension(self, effect: str, **shape: float) -> tuple[JointModel, dict[str, Any]]:
         """The refitted base model with ``effect`` added (coefficient 0 marks it as new:
@@ -798,6 +824,13 @@ class Criticism:
             status = "partly explained"
         else:
             status = "not explained by the catalogue"
+        # Admissible and adequate, yet showing only the onset of what identifies the effect:
+        # a nearby mode fits as well, so the catalogue's physics is not a finding.
+        onset = (
+            onset_only(fit.model, levels) if status in ("explained", "partly explained") else None
+        )
+        if onset:
+            status = "partly explained"
         # The effect's own contribution (the rest of the refitted model kept) for the words.
         alone = self.predict_at(fit.model.without(effect), levels, method=fit.method)
         own_points = self.predict_at(fit.model, levels, method=fit.method) - alone
@@ -824,7 +857,9 @@ class Criticism:
             signature=signature,
             reading=_reading(
                 effect, fit.model, dict(zip(channels, own.T, strict=True)), self.data, problems
-            ),
+            )
+            + (f"; OR with {_nearby_mode_words(onset, fit.model)}" if onset else ""),
+            alternative=_nearby_mode_words(onset, fit.model) if onset else "",
         )
 
     @cached_property
@@ -897,6 +932,9 @@ class Criticism:
                     )
                 )
             remaining = [c for c in remaining if c not in members]
+        for c in self.missing():
+            if c.alternative:
+                out.append(Group((c.effect, NEARBY_MODE), {}, _separates_nearby_mode(c.fit.model)))
         return out
 
     def _what_separates(self, members: Sequence[Candidate]) -> str:
@@ -1022,6 +1060,12 @@ class Criticism:
         best = self.best
         if verdict == "explained":
             return f"explained by {best.effect} ({100 * (share or 1):.0f} % of the free-form gain)"
+        if verdict == "partly explained" and best.alternative:
+            captured = f"{100 * share:.0f} %" if share is not None else "all"
+            return (
+                f"partly explained: {best.effect} fits ({captured} of the free-form gain) but is "
+                f"not identified; consistent with {best.effect} OR with {best.alternative}"
+            )
         if verdict == "partly explained":
             captured = f"{100 * share:.0f} %" if share is not None else "all"
             text = (
@@ -1242,6 +1286,8 @@ class Criticism:
                 "chi2": float(self.observed.chi2[0]),
                 "fires": self.fires,
             },
+            "adequate": self.adequate,
+            "beyond_scatter": list(self.beyond_scatter),
             "covariance": {
                 "kind": covariance.kind,
                 "n_curves": covariance.n_curves,
@@ -1289,10 +1335,30 @@ class Criticism:
         return paths | write_figures(self, folder)
 
 
+def _separates_nearby_mode(model: JointModel) -> str:
+    """What separates a slip onset from a nearby mode (see :func:`onset_only`)."""
+    shape = model["microslip"].shape
+    return (
+        "a second response point or the mode shape (a second mode has its own shape and "
+        f"resonance), or levels beyond {2e3 * shape['F_s'] / shape['k_t']:.2g} mm, where "
+        "slip's damping must fall back"
+    )
+
+
+def _nearby_mode_words(onset: str, model: JointModel) -> str:
+    """The out-of-catalogue alternative to an onset-only slip fit, in words."""
+    return (
+        "a nearby mode exchanging energy with this one as the backbone approaches it "
+        f"({onset}); one sensor cannot tell them apart — what would: "
+        f"{_separates_nearby_mode(model)}"
+    )
+
+
 def _ranking_entry(c: Candidate) -> dict[str, Any]:
     return {
         "effect": c.effect,
         "status": c.status,
+        "alternative": c.alternative,
         "explained_share": c.share,
         "delta_chi2": c.delta_chi2,
         "gain": c.gain,
