@@ -33,6 +33,7 @@ targets and the paper's values.
 
     .venv/bin/python bench/surrogate.py [--boxes demo,wide] [--n-curves 2000]
         [--epochs 400] [--head-degree 0|1|3] [--table5-sizes 200,300,400,500]
+        [--demo-spread 0.2] [--min-curves 3]
 """
 
 from __future__ import annotations
@@ -60,7 +61,13 @@ from pm_joint.workspace import Workspace
 from surrogates.dataset import add_measured, generate_dataset
 from surrogates.evaluate import PAPER_TABLE5, TARGETS
 from surrogates.export import export_surrogate
-from surrogates.grid import GRID_CHANNELS, MeasuredGrid, assembly_scatter, measured_grid
+from surrogates.grid import (
+    GRID_CHANNELS,
+    MIN_CURVES,
+    MeasuredGrid,
+    assembly_scatter,
+    measured_grid,
+)
 from surrogates.runtime import SurrogateRuntime
 from surrogates.train import TrainingConfig, train_on_dataset
 
@@ -91,6 +98,12 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument(
         "--demo-spread", type=float, default=SURROGATE_SPREAD,
         help=f"the demo box's relative spread (default {SURROGATE_SPREAD}, the demo's)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--min-curves", type=int, default=MIN_CURVES,
+        help=f"measured curves that must cover every grid amplitude (default {MIN_CURVES}: "
+        "the assembly scatter is defined at each; 1: the union of the curves' ranges, the "
+        "grid before this rule)",
     )  # fmt: skip
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads")
@@ -317,7 +330,7 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     torch.set_num_interop_threads(1)
     model, names, measured, labels, front = demo_front(Path(args.workdir))
-    grid = measured_grid(measured, 41)
+    grid = measured_grid(measured, 41, min_curves=args.min_curves)
     low, high = grid.range_m
     scatter = dict(zip(CHANNELS, assembly_scatter(measured, grid.amplitudes_m).T, strict=True))
     config = TrainingConfig(seed=args.seed, progress=False, head_degree=args.head_degree)
@@ -333,7 +346,7 @@ def main() -> None:
     print(
         f"parameters: {names}; measured range {1e3 * grid.measured_range_m[0]:.3g}–"
         f"{1e3 * grid.measured_range_m[1]:.3g} mm; grid {1e3 * low:.3g}–{1e3 * high:.3g} mm "
-        f"(at least {grid.min_curves} curves cover); curves covering each grid amplitude: "
+        f"(at least {grid.min_curves} curve(s) cover); curves covering each grid amplitude: "
         f"{grid.curves_covering.tolist()}"
     )
     print(

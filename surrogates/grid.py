@@ -348,8 +348,13 @@ class MeasuredGrid:
             "curves_covering": self.curves_covering.tolist(),
             "why": (
                 f"the widest amplitude interval where at least {self.min_curves} measured "
-                "curves cover every amplitude: the assembly scatter, the yardstick of the "
-                f"accuracy figures, needs {self.min_curves} curves"
+                "curve(s) cover every amplitude: the assembly scatter, the yardstick of the "
+                f"accuracy figures, needs {MIN_CURVES}"
+                + (
+                    ""
+                    if self.min_curves >= MIN_CURVES
+                    else ", so it is undefined where fewer cover"
+                )
             ),
         }
 
@@ -365,17 +370,19 @@ def measured_grid(
 
     Every amplitude of the grid is covered by ``min_curves`` or more of the
     curves that can be placed on a grid (:func:`curves_covering`), so the
-    assembly scatter (:func:`assembly_scatter`) is defined at each one. Where the
-    covered amplitudes fall apart into several intervals (curves that do not
-    overlap), the widest on a logarithmic scale is taken.
+    assembly scatter (:func:`assembly_scatter`) is defined at each one (with its
+    default of 3; ``min_curves=1`` gives the union of overlapping curves' ranges,
+    the grid before issue #15). Where the covered amplitudes fall apart into
+    several intervals (curves that do not overlap), the widest on a logarithmic
+    scale is taken.
 
     Raises
     ------
     ValueError
         When no interval of positive width is covered by ``min_curves`` curves.
     """
-    if min_curves < 2:
-        raise ValueError(f"min_curves must be ≥ 2 for a standard deviation, got {min_curves}")
+    if min_curves < 1:
+        raise ValueError(f"min_curves must be ≥ 1, got {min_curves}")
     extents = [
         curve.amplitude_range_m
         for curve in curves

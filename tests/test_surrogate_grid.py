@@ -217,6 +217,8 @@ def test_the_grid_ends_where_fewer_than_three_measured_curves_cover():
     assert np.isnan(assembly_scatter(curves, beyond)).all()
     # With a fourth curve required, the grid is where four cover: 0.2–1.0 mm.
     assert measured_grid(curves, 9, min_curves=4).range_m == pytest.approx((2e-4, 1e-3))
+    # One curve: the union of the (overlapping) ranges.
+    assert measured_grid(curves, 9, min_curves=1).range_m == pytest.approx((5e-5, 3e-3))
 
 
 def test_the_grid_needs_three_overlapping_placeable_curves():
