@@ -7,11 +7,11 @@ records, and each record's label (its own fit of the model's terms).
 
 For each box (``demo``: the demo's, ± ``--demo-spread`` around the model, widened to
 cover every label, :func:`pm_joint.pipeline.surrogate_box`; ``wide``: ± 50 %): an
-amplitude-grid dataset
-(:mod:`surrogates.grid`: frequency, damping ratio, base acceleration and the
-``has_backbone`` mask on 41 amplitudes over the measured range, every parameter
-vector kept) of ``--n-curves`` analytical curves plus the 25 measured curves with
-their labels; splits train / validation / test by origin (the measured curves
+amplitude-grid dataset (:mod:`surrogates.grid`: frequency, damping ratio, base
+acceleration and the ``has_backbone`` mask on 41 amplitudes over the range at
+least 3 measured curves cover, :func:`surrogates.grid.measured_grid`, every
+parameter vector kept) of ``--n-curves`` analytical curves plus the 25 measured
+curves with their labels; splits train / validation / test by origin (the measured curves
 all in test unless ``--measured-in-training``: the likelihood's curves are then
 no training data); the default surrogate (the paper's network) trained on the
 train split, stopped early on validation, scored on test beside the per-point
@@ -33,6 +33,7 @@ targets and the paper's values.
 
     .venv/bin/python bench/surrogate.py [--boxes demo,wide] [--n-curves 2000]
         [--epochs 400] [--head-degree 0|1|3] [--table5-sizes 200,300,400,500]
+        [--demo-spread 0.2] [--min-curves 3]
 """
 
 from __future__ import annotations
@@ -60,7 +61,13 @@ from pm_joint.workspace import Workspace
 from surrogates.dataset import add_measured, generate_dataset
 from surrogates.evaluate import PAPER_TABLE5, TARGETS
 from surrogates.export import export_surrogate
-from surrogates.grid import GRID_CHANNELS, assembly_scatter
+from surrogates.grid import (
+    GRID_CHANNELS,
+    MIN_CURVES,
+    MeasuredGrid,
+    assembly_scatter,
+    measured_grid,
+)
 from surrogates.runtime import SurrogateRuntime
 from surrogates.train import TrainingConfig, train_on_dataset
 
@@ -91,6 +98,12 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument(
         "--demo-spread", type=float, default=SURROGATE_SPREAD,
         help=f"the demo box's relative spread (default {SURROGATE_SPREAD}, the demo's)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--min-curves", type=int, default=MIN_CURVES,
+        help=f"measured curves that must cover every grid amplitude (default {MIN_CURVES}: "
+        "the assembly scatter is defined at each; 1: the union of the curves' ranges, the "
+        "grid before this rule)",
     )  # fmt: skip
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads")
@@ -158,8 +171,19 @@ def headline(report: dict, origin: str) -> dict:
         return {}
     rows = {}
     for channel in CHANNELS:
-        ratios = part["ratios"][channel]
+        ratios, models = part["ratios"][channel], part["models"]
+        surrogate, linear = (models[m][channel]["rmse_per_level"] for m in ("surrogate", "linear"))
         rows[channel] = {
+            # Per grid amplitude: where the worst ratio sits, and the linear baseline there.
+            "rmse_per_level_surrogate": surrogate,
+            "rmse_per_level_linear": linear,
+            "to_linear_per_level": [
+                None if s is None or not lin else s / lin
+                for s, lin in zip(surrogate, linear, strict=True)
+            ],
+            "to_scatter_per_level": ratios.get("to_scatter_per_level"),
+            "linear_to_scatter_per_level": ratios.get("linear_to_scatter_per_level"),
+            "worst_level": ratios.get("worst_level"),
             **{f"rmse_{m}": part["models"][m][channel]["rmse"] for m in part["models"]},
             "to_linear": ratios["to_linear"],
             "to_cubic": ratios["to_cubic"],
@@ -174,9 +198,9 @@ def headline(report: dict, origin: str) -> dict:
     return rows
 
 
-def run_box(name, box, model, names, measured, labels, scatter, args, config) -> dict:
-    low = min(b.amplitude_range_m[0] for b in measured)
-    high = max(b.amplitude_range_m[1] for b in measured)
+def run_box(
+    name, box, model, names, measured, labels, grid: MeasuredGrid, scatter, args, config
+) -> dict:
     start = time.process_time()
     data = generate_dataset(
         model,
@@ -184,7 +208,8 @@ def run_box(name, box, model, names, measured, labels, scatter, args, config) ->
         args.n_curves,
         representation="amplitude_grid",
         bounds=box,
-        amplitude_range_m=(low, high),
+        amplitude_range_m=grid.range_m,
+        n_levels=grid.amplitudes_m.size,
         seed=args.seed,
         progress=False,
     )
@@ -305,10 +330,9 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     torch.set_num_interop_threads(1)
     model, names, measured, labels, front = demo_front(Path(args.workdir))
-    low = min(b.amplitude_range_m[0] for b in measured)
-    high = max(b.amplitude_range_m[1] for b in measured)
-    grid = np.geomspace(low, high, 41)
-    scatter = dict(zip(CHANNELS, assembly_scatter(measured, grid).T, strict=True))
+    grid = measured_grid(measured, 41, min_curves=args.min_curves)
+    low, high = grid.range_m
+    scatter = dict(zip(CHANNELS, assembly_scatter(measured, grid.amplitudes_m).T, strict=True))
     config = TrainingConfig(seed=args.seed, progress=False, head_degree=args.head_degree)
     overrides = {
         "max_epochs": args.epochs,
@@ -319,7 +343,12 @@ def main() -> None:
     if args.epochs is not None:
         config = dataclasses.replace(config, patience=max(config.patience, args.epochs))
     print(f"model: {model.equation()}")
-    print(f"parameters: {names}; measured range {1e3 * low:.3g}–{1e3 * high:.3g} mm")
+    print(
+        f"parameters: {names}; measured range {1e3 * grid.measured_range_m[0]:.3g}–"
+        f"{1e3 * grid.measured_range_m[1]:.3g} mm; grid {1e3 * low:.3g}–{1e3 * high:.3g} mm "
+        f"(at least {grid.min_curves} curve(s) cover); curves covering each grid amplitude: "
+        f"{grid.curves_covering.tolist()}"
+    )
     print(
         "assembly scatter of frequency (Hz) per amplitude: "
         f"{np.nanmin(scatter['frequency_hz']):.3g}–{np.nanmax(scatter['frequency_hz']):.3g}"
@@ -330,7 +359,9 @@ def main() -> None:
     }
     results = []
     for name in [b for b in args.boxes.split(",") if b]:
-        figures = run_box(name, boxes[name], model, names, measured, labels, scatter, args, config)
+        figures = run_box(
+            name, boxes[name], model, names, measured, labels, grid, scatter, args, config
+        )
         print_box(figures)
         results.append(figures)
 
@@ -411,7 +442,9 @@ def main() -> None:
                 "scatter_hz": {
                     "min": float(np.nanmin(scatter["frequency_hz"])),
                     "max": float(np.nanmax(scatter["frequency_hz"])),
+                    "per_level": scatter["frequency_hz"].tolist(),
                 },
+                "grid": {**grid.to_dict(), "amplitudes_m": grid.amplitudes_m.tolist()},
                 "boxes": results,
                 "table5": table5,
                 "table5_epoch_cap": args.table5_epochs or None,

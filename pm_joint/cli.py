@@ -376,7 +376,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--epochs", type=int, help="epochs per stage (default: the paper-sized run)")
     p.add_argument(
         "--amplitudes", type=int, default=41,
-        help="response amplitudes of the grid over the measured range (default 41)",
+        help="response amplitudes of the grid, over the amplitudes at least 3 measured curves "
+        "cover (default 41)",
     )  # fmt: skip
     p.add_argument(
         "--measured-in-training", action="store_true",

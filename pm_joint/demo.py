@@ -61,8 +61,12 @@ SIZES = {
 #: The SINDy library of the demo: the paper's (every catalogue term but microslip).
 DEMO_LIBRARY = PAPER_LIBRARY
 #: The surrogate's box: ± this around the identified model, widened to cover every label
-#: (:func:`pm_joint.pipeline.surrogate_box`); the updating's prior is this box.
-SURROGATE_SPREAD = 0.1
+#: (:func:`pm_joint.pipeline.surrogate_box`); the updating's prior is this box. At ± 20 %
+#: the backbones' nonlinearity in the parameters reaches the scale of the assembly scatter
+#: (the linear baseline's frequency error is 0.35–0.8 × the scatter per amplitude, 1.3 × at
+#: the lowest, where 3 curves give it; at ± 10 % 0.09–0.33 ×) and the surrogate meets issue
+#: #15's targets there (bench/results/surrogate_demo_spread0.2.json).
+SURROGATE_SPREAD = 0.2
 
 
 class _Stages:

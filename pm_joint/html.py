@@ -272,6 +272,17 @@ def surrogate_section(
         f"added. Used {n_used} of the {n_named} curves named "
         f"({100 * n_used / max(n_named, 1):.1f} %).",
     ]
+    grid = data.get("grid")
+    if grid:
+        covering = grid["curves_covering"]
+        low, high = grid["measured_range_m"]
+        text.append(
+            f"The grid spans the amplitudes at least {grid['min_curves']} of the "
+            f"{grid['n_curves']} measured curves cover (they span {1e3 * low:.3g}–"
+            f"{1e3 * high:.3g} mm together), so the assembly scatter is defined at every grid "
+            f"amplitude; curves covering each, from the smallest amplitude up: "
+            f"{', '.join(map(str, covering))}."
+        )
     if excluded:
         text.append(
             f"Left out: {len(excluded)} measured curves: "

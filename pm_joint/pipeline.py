@@ -53,7 +53,7 @@ from pm_joint.inference import (
 from pm_joint.report_folder import report
 from pm_joint.workspace import Workspace
 from surrogates.dataset import add_measured, generate_dataset, record_labels
-from surrogates.grid import GRID_CHANNELS, assembly_scatter
+from surrogates.grid import GRID_CHANNELS, assembly_scatter, measured_grid
 from surrogates.labels import MisfitPolicy
 from surrogates.runtime import SurrogateRuntime
 
@@ -307,7 +307,9 @@ def train_surrogate_stage(
     """Amplitude-grid dataset (analytical + measured curves), training and ONNX export.
 
     The backbones are sampled on ``n_amplitudes`` response amplitudes geometric
-    over the measured range (:mod:`surrogates.grid`): frequency, damping ratio,
+    over the amplitudes at least three measured curves cover
+    (:func:`surrogates.grid.measured_grid`, recorded in the dataset's provenance
+    and the sidecar under ``grid``): frequency, damping ratio,
     base acceleration and the ``has_backbone`` mask, defined for every parameter
     vector of the box, so no analytical curve is dropped. ``labels`` are the
     measured curves' parameters in the order of
@@ -345,15 +347,16 @@ def train_surrogate_stage(
     names = default_free(model)
     box = surrogate_box(model, names, labels, relative_spread)
     n_measured = 0 if labels is None else len(measured)
-    low = min(b.amplitude_range_m[0] for b in measured)
-    high = max(b.amplitude_range_m[1] for b in measured)
-    grid = np.geomspace(low, high, n_amplitudes)
-    scatter = assembly_scatter(measured, grid)
+    grid = measured_grid(measured, n_amplitudes)
+    scatter = assembly_scatter(measured, grid.amplitudes_m)
     dataset = generate_dataset(
         model, names, max(n_curves - n_measured, 1), representation="amplitude_grid",
-        bounds=box, amplitude_range_m=(low, high), n_levels=n_amplitudes, seed=seed,
+        bounds=box, amplitude_range_m=grid.range_m, n_levels=n_amplitudes, seed=seed,
         progress=progress, executor=executor,
     )  # fmt: skip
+    dataset = dataclasses.replace(
+        dataset, provenance={**dataset.provenance, "grid": grid.to_dict()}
+    )
     if labels is not None:
         dataset = add_measured(
             dataset, measured, labels, scatter=scatter, misfit_threshold=misfit_threshold,

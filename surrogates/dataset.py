@@ -67,6 +67,7 @@ from surrogates.grid import (
     MASK_REASONS,
     GridEvaluation,
     assembly_scatter,
+    geometric_grid,
     grid_backbones,
     measured_on_grid,
     point_base_acceleration,
@@ -696,7 +697,7 @@ def generate_dataset(
                 "representation='excitation_levels' for it)"
             )
         how = GridEvaluation(
-            np.geomspace(low, high, n_levels), resolved, harmonics, refine, grid_margin
+            geometric_grid(amplitude_range_m, n_levels), resolved, harmonics, refine, grid_margin
         )
         return _grid_dataset(
             model, names, parameters, how, channels, provenance, chunk_size, executor, progress

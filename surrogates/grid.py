@@ -32,11 +32,17 @@ Measured curves (:func:`measured_on_grid`) are interpolated onto the grid where
 they cover it; their base-acceleration level comes from the power balance of
 each point (:func:`point_base_acceleration`). :func:`assembly_scatter` is the
 spread of such curves across assemblies, per grid amplitude: the yardstick of
-every accuracy figure.
+every accuracy figure. It needs at least three curves at an amplitude, so the
+grid of a campaign (:func:`measured_grid`, the one definition the pipeline, the
+CLI, the demo and the bench use) spans only the amplitudes that many measured
+curves cover: beyond, the accuracy figures would have no yardstick, and a
+standard deviation of two curves varies by a factor of several from campaign to
+campaign.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from itertools import pairwise
 
@@ -50,9 +56,14 @@ from surrogates.runtime import REPRESENTATION_CHANNELS
 __all__ = [
     "GRID_CHANNELS",
     "MASK_REASONS",
+    "MIN_CURVES",
     "GridEvaluation",
+    "MeasuredGrid",
     "assembly_scatter",
+    "curves_covering",
+    "geometric_grid",
     "grid_backbones",
+    "measured_grid",
     "measured_on_grid",
     "point_base_acceleration",
 ]
@@ -63,6 +74,23 @@ GRID_CHANNELS = REPRESENTATION_CHANNELS["amplitude_grid"]
 _NUDGE = 1e-6
 #: Why an entry is masked; code ``i + 1`` in :func:`grid_backbones`' reasons (0: a backbone).
 MASK_REASONS = ("no_solution", "no_power_input", "passed")
+#: Measured curves that must cover a grid amplitude: fewer give no assembly scatter there.
+MIN_CURVES = 3
+
+
+def geometric_grid(amplitude_range_m: tuple[float, float], n_amplitudes: int) -> np.ndarray:
+    """``n_amplitudes`` response amplitudes (m) geometric over ``amplitude_range_m``, ends included.
+
+    The spacing of every amplitude grid (:func:`measured_grid`,
+    :func:`~surrogates.dataset.generate_dataset`): equal ratios, as the backbones
+    change on a logarithmic amplitude scale.
+    """
+    low, high = amplitude_range_m
+    if not (0 < low < high and np.isfinite(high)) or n_amplitudes < 2:
+        raise ValueError(
+            f"need n_amplitudes ≥ 2 and 0 < low < high, got {n_amplitudes}, {amplitude_range_m}"
+        )
+    return np.geomspace(low, high, n_amplitudes)
 
 
 @dataclass(frozen=True)
@@ -225,12 +253,40 @@ def measured_on_grid(
     return np.where(observed[:, None], values, 0.0), observed
 
 
+def _placed(
+    curves: Iterable[Backbone], amplitudes_m: np.ndarray, level_gain: float | None
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`measured_on_grid` of every curve it can place (two distinct amplitudes, a
+    positive power input at every point); the others are left out."""
+    placed = []
+    for curve in curves:
+        try:
+            placed.append(measured_on_grid(curve, amplitudes_m, level_gain))
+        except ValueError:
+            continue
+    return placed
+
+
+def curves_covering(
+    curves: BackboneSet, amplitudes_m: np.ndarray, *, level_gain: float | None = None
+) -> np.ndarray:
+    """``(n_amplitudes,)`` int: how many measured curves cover each amplitude.
+
+    A curve covers the amplitudes between its smallest and largest one; curves
+    :func:`assembly_scatter` leaves out are not counted.
+    """
+    placed = _placed(curves, np.asarray(amplitudes_m, dtype=float), level_gain)
+    if not placed:
+        return np.zeros(len(amplitudes_m), dtype=int)
+    return np.sum([observed for _, observed in placed], axis=0).astype(int)
+
+
 def assembly_scatter(
     curves: BackboneSet,
     amplitudes_m: np.ndarray,
     *,
     level_gain: float | None = None,
-    min_curves: int = 3,
+    min_curves: int = MIN_CURVES,
 ) -> np.ndarray:
     """Assembly-to-assembly standard deviation of measured curves per grid amplitude.
 
@@ -241,18 +297,118 @@ def assembly_scatter(
     """
     if min_curves < 2:
         raise ValueError(f"min_curves must be ≥ 2 for a standard deviation, got {min_curves}")
-    stacked, covered = [], []
-    for curve in curves:
-        try:
-            values, observed = measured_on_grid(curve, amplitudes_m, level_gain)
-        except ValueError:
-            continue
-        stacked.append(np.where(observed[:, None], values, np.nan))
-        covered.append(observed)
-    if not stacked:
+    placed = _placed(curves, amplitudes_m, level_gain)
+    if not placed:
         return np.full((len(amplitudes_m), 3), np.nan)
-    stacked = np.array(stacked)
-    enough = np.sum(covered, axis=0) >= min_curves
+    stacked = np.array([np.where(observed[:, None], v, np.nan) for v, observed in placed])
+    enough = np.sum([observed for _, observed in placed], axis=0) >= min_curves
     scatter = np.full(stacked.shape[1:], np.nan)
     scatter[enough] = np.nanstd(stacked[:, enough], axis=0, ddof=1)
     return scatter
+
+
+@dataclass(frozen=True)
+class MeasuredGrid:
+    """The amplitude grid of a campaign, and how many measured curves cover each amplitude.
+
+    Attributes
+    ----------
+    amplitudes_m
+        The grid (m): geometric (:func:`geometric_grid`) over the widest interval
+        in which every amplitude is covered by at least ``min_curves`` curves.
+    curves_covering
+        Measured curves covering each grid amplitude (:func:`curves_covering`).
+    min_curves
+        The coverage the grid needs.
+    measured_range_m
+        Smallest and largest amplitude of any measured curve that can be placed.
+    n_curves
+        Measured curves that can be placed on a grid (:func:`assembly_scatter`'s).
+    """
+
+    amplitudes_m: np.ndarray
+    curves_covering: np.ndarray
+    min_curves: int
+    measured_range_m: tuple[float, float]
+    n_curves: int
+
+    @property
+    def range_m(self) -> tuple[float, float]:
+        """The grid's first and last amplitude (m)."""
+        return float(self.amplitudes_m[0]), float(self.amplitudes_m[-1])
+
+    def to_dict(self) -> dict:
+        """Plain JSON (for a sidecar or a bench record), with why the grid ends where it does."""
+        return {
+            "range_m": list(self.range_m),
+            "n_amplitudes": int(self.amplitudes_m.size),
+            "min_curves": self.min_curves,
+            "measured_range_m": list(self.measured_range_m),
+            "n_curves": self.n_curves,
+            "curves_covering": self.curves_covering.tolist(),
+            "why": (
+                f"the widest amplitude interval where at least {self.min_curves} measured "
+                "curve(s) cover every amplitude: the assembly scatter, the yardstick of the "
+                f"accuracy figures, needs {MIN_CURVES}"
+                + (
+                    ""
+                    if self.min_curves >= MIN_CURVES
+                    else ", so it is undefined where fewer cover"
+                )
+            ),
+        }
+
+
+def measured_grid(
+    curves: BackboneSet,
+    n_amplitudes: int = 41,
+    *,
+    min_curves: int = MIN_CURVES,
+    level_gain: float | None = None,
+) -> MeasuredGrid:
+    """The amplitude grid of a campaign: where at least ``min_curves`` measured curves cover.
+
+    Every amplitude of the grid is covered by ``min_curves`` or more of the
+    curves that can be placed on a grid (:func:`curves_covering`), so the
+    assembly scatter (:func:`assembly_scatter`) is defined at each one (with its
+    default of 3; ``min_curves=1`` gives the union of overlapping curves' ranges,
+    the grid before issue #15). Where the covered amplitudes fall apart into
+    several intervals (curves that do not overlap), the widest on a logarithmic
+    scale is taken.
+
+    Raises
+    ------
+    ValueError
+        When no interval of positive width is covered by ``min_curves`` curves.
+    """
+    if min_curves < 1:
+        raise ValueError(f"min_curves must be ≥ 1, got {min_curves}")
+    extents = [
+        curve.amplitude_range_m
+        for curve in curves
+        if _placed([curve], np.array(curve.amplitude_range_m), level_gain)
+    ]
+    if not extents:
+        raise ValueError("no measured curve can be placed on an amplitude grid")
+    low, high = np.array(extents).T
+    ends = np.unique(np.concatenate([low, high]))
+    # Between two consecutive ends the number of covering curves is constant: the curves
+    # that start at or below the left end and end at or above the right one.
+    segment = (low[:, None] <= ends[None, :-1]) & (high[:, None] >= ends[None, 1:])
+    enough = np.concatenate([[False], segment.sum(axis=0) >= min_curves, [False]])
+    starts = np.flatnonzero(~enough[:-1] & enough[1:])
+    stops = np.flatnonzero(enough[:-1] & ~enough[1:])
+    if starts.size == 0:
+        raise ValueError(
+            f"no amplitude interval is covered by {min_curves} measured curves "
+            f"({len(extents)} curves can be placed)"
+        )
+    widest = np.argmax(np.log(ends[stops]) - np.log(ends[starts]))
+    grid = geometric_grid((ends[starts[widest]], ends[stops[widest]]), n_amplitudes)
+    return MeasuredGrid(
+        amplitudes_m=grid,
+        curves_covering=curves_covering(curves, grid, level_gain=level_gain),
+        min_curves=min_curves,
+        measured_range_m=(float(low.min()), float(high.max())),
+        n_curves=len(extents),
+    )

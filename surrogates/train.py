@@ -445,6 +445,8 @@ def train_on_dataset(
         },
         # Every offered curve's label misfit in each value channel (assembly SDs).
         "label_misfit_by_channel": misfit_by_channel,
+        # Why the amplitude grid spans what it does (surrogates.grid.measured_grid), if known.
+        "grid": dataset.provenance.get("grid"),
     }
     surrogate.test_report = accuracy_report(dataset, surrogate.predict, scatter=scatter)
     return surrogate

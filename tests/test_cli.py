@@ -201,6 +201,12 @@ def test_rig_campaign_through_every_stage(rig_campaign, tmp_path, capsys):
     assert set(sidecar["training"]["data"]["measured_curves"]) == {
         o.removeprefix("measured:") for o in dataset.origin[dataset.is_measured]
     }
+    # Three curves, three needed at every grid amplitude: the grid is the range all share.
+    shared = BackboneSet.from_csv(rig_campaign / "backbones.csv").common_range()
+    grid = sidecar["training"]["data"]["grid"]
+    assert grid["range_m"] == pytest.approx(shared, rel=1e-12)
+    assert grid["curves_covering"] == [3] * dataset.spec.n_levels
+    assert dataset.spec.amplitudes_m[[0, -1]] == pytest.approx(shared, rel=1e-12)
     # On a two-worker dask LocalCluster the dataset is the serial one, bit for bit.
     on_dask = tmp_path / "surrogate_dask"
     argv_dask = [*argv[:-1], str(on_dask), "--curves", "80", "--epochs", "1", "--workers", "2"]

@@ -30,7 +30,13 @@ from surrogates.baselines import MeanCurve, PolynomialBaseline, monomials
 from surrogates.dataset import BackboneDataset, _canonical_bytes, add_measured, generate_dataset
 from surrogates.evaluate import accuracy_report, amplitudes_at_levels
 from surrogates.export import export_surrogate
-from surrogates.grid import GRID_CHANNELS, assembly_scatter, measured_on_grid
+from surrogates.grid import (
+    GRID_CHANNELS,
+    assembly_scatter,
+    curves_covering,
+    measured_grid,
+    measured_on_grid,
+)
 from surrogates.labels import label_misfit, misfit_weight
 from surrogates.nets import NetConfig
 from surrogates.runtime import SurrogateRuntime, SurrogateSpec
@@ -184,6 +190,46 @@ def test_label_misfit_and_assembly_scatter_by_hand():
     np.testing.assert_allclose(scatter[~covered_by_four, 0], offsets[:3].std(ddof=1))
     thin = assembly_scatter(BackboneSet(curves), grid, min_curves=4)
     assert np.isnan(thin[~covered_by_four]).all() and np.isfinite(thin[covered_by_four]).all()
+
+
+def _flat_curve(low_mm: float, high_mm: float, label: str) -> Backbone:
+    amplitude = 1e-3 * np.geomspace(low_mm, high_mm, 6)
+    return Backbone(amplitude, np.full(6, 100.0), np.full(6, 0.004), label=label)
+
+
+def test_the_grid_ends_where_fewer_than_three_measured_curves_cover():
+    # Extents (mm) chosen by hand: sorted starts 0.05, 0.08, 0.1, 0.2, 0.3 and ends 0.9,
+    # 1.0, 1.5, 2.0, 3.0, so three curves cover from the third start (0.1) to the third
+    # largest end (1.5) and only two just outside; the union (0.05–3 mm) is wider.
+    extents = [(0.1, 1.0), (0.05, 2.0), (0.2, 1.5), (0.08, 0.9), (0.3, 3.0)]
+    curves = BackboneSet(_flat_curve(lo, hi, f"c{i}") for i, (lo, hi) in enumerate(extents))
+    grid = measured_grid(curves, 9)
+    assert grid.range_m == pytest.approx((1e-4, 1.5e-3), rel=1e-12)
+    np.testing.assert_allclose(np.diff(np.log(grid.amplitudes_m)), math.log(15) / 8)
+    assert grid.measured_range_m == pytest.approx((5e-5, 3e-3), rel=1e-12)
+    # Counted by hand at each grid amplitude 0.1·15^(i/8) mm: 0.1, 0.140, 0.197 (below the
+    # third start, 0.2), 0.276, 0.387, 0.543, 0.762, 1.07 (past the ends 0.9 and 1.0), 1.5.
+    assert grid.curves_covering.tolist() == [3, 3, 3, 4, 5, 5, 5, 3, 3]
+    assert np.isfinite(assembly_scatter(curves, grid.amplitudes_m)).all()
+    # Just beyond either end only two curves cover, so the scatter is undefined there.
+    beyond = np.array([0.095e-3, 1.55e-3])
+    assert curves_covering(curves, beyond).tolist() == [2, 2]
+    assert np.isnan(assembly_scatter(curves, beyond)).all()
+    # With a fourth curve required, the grid is where four cover: 0.2–1.0 mm.
+    assert measured_grid(curves, 9, min_curves=4).range_m == pytest.approx((2e-4, 1e-3))
+    # One curve: the union of the (overlapping) ranges.
+    assert measured_grid(curves, 9, min_curves=1).range_m == pytest.approx((5e-5, 3e-3))
+
+
+def test_the_grid_needs_three_overlapping_placeable_curves():
+    # Two clusters of three overlapping curves: the wider (in log amplitude) is the grid.
+    low = [_flat_curve(0.1, 0.3, "a"), _flat_curve(0.1, 0.3, "b"), _flat_curve(0.12, 0.4, "c")]
+    high = [_flat_curve(1.0, 3.0, "d"), _flat_curve(0.8, 3.0, "e"), _flat_curve(1.0, 3.5, "f")]
+    assert measured_grid(BackboneSet(low + high), 5).range_m == pytest.approx((1e-3, 3e-3))
+    # A curve with one distinct amplitude cannot be placed: it does not count.
+    point = Backbone(np.full(3, 2e-4), np.full(3, 100.0), np.full(3, 0.004), label="p")
+    with pytest.raises(ValueError, match="covered by 3"):
+        measured_grid(BackboneSet([*low[:2], point]), 5)
 
 
 # -- splits, counts, baselines -------------------------------------------------------------
