@@ -17,7 +17,7 @@ supports: a removal that costs less than the calibrated threshold, a replacement
 gains more than :data:`SEPARATION`. With two effects missing, a stand-in that mimics
 both alone gives way to the true effect once the other is in; and when neither alone
 captures enough of the free-form gain to be proposed, the best admissible one is added
-on trial and kept only if the next round proposes an effect.
+on trial and kept only if the next round explains the data.
 
 **One statistic.** Everything is judged by one likelihood
 (:mod:`identification.fitting.data`): the residual of the *mean* curve at common
@@ -1475,7 +1475,8 @@ def run_rounds(crit: Criticism, rounds: int) -> list[Criticism]:
     swap step (:meth:`Criticism.swap`) over the effects added in earlier rounds. When
     nothing is proposed but a :attr:`~Criticism.provisional` candidate exists (two
     effects missing: neither explains enough alone), it is added on trial and kept only
-    when the next round proposes an effect (two additions); otherwise the loop stops.
+    when the next round's verdict is "explained" (an effect that, beside it, explains the
+    data: two additions); otherwise the loop stops.
 
     Returns
     -------
@@ -1494,7 +1495,9 @@ def run_rounds(crit: Criticism, rounds: int) -> list[Criticism]:
             if trial is None or added + 2 > rounds:
                 break
             tried = crit.add(trial.effect)
-            if not tried.missing():
+            # kept only when the pair explains the data: out-of-catalogue physics, which
+            # catalogue terms partly mimic one after another, is not fitted term by term
+            if tried.verdict != "explained":
                 break
             alternatives[trial.effect] = crit.alternatives(trial.effect)
             chain.append(tried)
