@@ -191,8 +191,9 @@ class StudyResult:
     @property
     def hit(self) -> bool | None:
         """Hidden scenarios: every hidden effect the start lacks is ranked first or in the
-        first group of a round, with only effects of the truth added before (None for
-        other kinds)."""
+        first group of a round, with only effects of the truth added before; or the last
+        model (after the loop's swaps and trial additions) holds every one of them and no
+        effect beyond the truth's (None for other kinds)."""
         if self.kind != "hidden":
             return None
         missing = [e for e in self.hidden if e not in self.start]
