@@ -401,7 +401,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", required=True, help="model JSON file")
     p.add_argument("--out", required=True, help="report folder (criticism.json + figures)")
     p.add_argument(
-        "--rounds", type=int, default=0, help="add the best proposed effect this many times"
+        "--rounds",
+        type=int,
+        default=0,
+        help="add up to this many effects, best proposed first, each round followed by a swap step",
     )
     _add_executor_options(
         p, "dask LocalCluster workers refitting the candidate effects (default: serial; the "

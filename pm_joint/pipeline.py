@@ -226,7 +226,8 @@ def criticize_campaign(
     posterior=None,
     executor: Any = None,
 ):
-    """Criticize a model against a campaign; optionally add the best effect ``rounds`` times.
+    """Criticize a model against a campaign; optionally add up to ``rounds`` effects
+    (forward-backward stepwise: :func:`~identification.criticism.criticism.run_rounds`).
 
     ``measured`` are the campaign's backbones when already extracted (with the
     harmonics they carry); else the campaign's workspace gives them (its
@@ -250,12 +251,10 @@ def criticize_campaign(
     if measured is None:
         workspace = folder if isinstance(folder, Workspace) else Workspace(folder)
         measured = workspace.backbones
+    from identification.criticism.criticism import run_rounds
+
     crit = criticize(model, measured, posterior=posterior, executor=executor)
-    for _ in range(rounds):
-        proposals = crit.missing()
-        if not proposals:
-            break
-        crit = crit.add(proposals[0].effect)
+    crit = run_rounds(crit, rounds)[-1]
     crit.write(out)
     return crit
 

@@ -27,7 +27,7 @@ from scipy import stats
 
 from identification.analytical.harmonic import backbone as harmonic_backbone
 from identification.analytical.pll import pll_backbones
-from identification.criticism.criticism import Criticism, criticize
+from identification.criticism.criticism import Criticism, criticize, run_rounds
 from identification.fitting.least_squares import fit_backbones
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.extraction import extract_backbones
@@ -145,7 +145,20 @@ class StudyResult:
 
     @property
     def added(self) -> list[str]:
-        return [s.action[2:] for s in self.history if s.action.startswith("+ ")]
+        """The effects the loop added, in order (a swap's replacement after its round's)."""
+        out = []
+        for step in self.history:
+            for part in step.action.split("; "):
+                if part.startswith("+ "):
+                    out.append(part[2:])
+                elif part.startswith("swap "):
+                    out += part[len("swap ") :].split(" + ")[1:]
+        return out
+
+    @property
+    def kept(self) -> list[str]:
+        """The effects the last model holds beyond the start (after every swap)."""
+        return [e for e in self.criticisms[-1].base.model.effects if e not in self.start]
 
     @property
     def first(self) -> str | None:
@@ -178,11 +191,16 @@ class StudyResult:
     @property
     def hit(self) -> bool | None:
         """Hidden scenarios: every hidden effect the start lacks is ranked first or in the
-        first group of a round, with only effects of the truth added before (None for
-        other kinds)."""
+        first group of a round, with only effects of the truth added before; or the last
+        model (after the loop's swaps and trial additions) holds every one of them and no
+        effect beyond the truth's (None for other kinds)."""
         if self.kind != "hidden":
             return None
         missing = [e for e in self.hidden if e not in self.start]
+        # forward-backward: the last model holds them, and only effects of the truth
+        kept = self.kept
+        if missing and all(e in kept for e in missing) and all(e in self.truth for e in kept):
+            return True
         rounds = [self._round_of(e) for e in missing]
         if any(r is None for r in rounds):
             return False
@@ -289,6 +307,8 @@ class StudyResult:
             "ranked_first": self.first,
             "groups": groups,
             "added": self.added,
+            "kept": self.kept,
+            "swaps": [s for c in self.criticisms for s in c.swaps if s["kept"]],
             "in_start": self.in_start,
             "start_adequate": self.start_adequate,
             "truth_gap_se": self.truth_gap,
@@ -344,8 +364,10 @@ def criticism_study(
     ``"linear"``: the bare linear-viscous model; ``"sindy"``: SINDy on the first three
     records with the polynomial library) is fitted to the backbones alone (frequency
     and damping, as a user's first fit is; SINDy's own coefficients for ``"sindy"``);
-    the criticism uses the harmonics the backbones carry too. Each round adds the
-    effect proposed first, until nothing is proposed or ``rounds`` effects were added.
+    the criticism uses the harmonics the backbones carry too. The loop is forward-backward
+    stepwise (:func:`~identification.criticism.criticism.run_rounds`): each round adds the
+    effect proposed first and may swap out an effect an earlier round added, until nothing
+    is proposed or ``rounds`` effects were added.
     ``options`` go to :func:`identification.criticism.criticism.criticize`.
     """
     began = time.perf_counter()
@@ -361,14 +383,7 @@ def criticism_study(
     result = StudyResult(
         scenario, seed, start, preset.model, preset.hidden_effects, measured, records, model
     )
-    crit = criticize(model, measured, **options)
-    result.criticisms.append(crit)
-    for _ in range(rounds):
-        proposed = crit.missing()
-        if not proposed:
-            break
-        crit = crit.add(proposed[0].effect)
-        result.criticisms.append(crit)
+    result.criticisms = run_rounds(criticize(model, measured, **options), rounds)
     result.seconds = time.perf_counter() - began
     return result
 

@@ -14,7 +14,7 @@ from scipy.special import i1
 
 from identification.analytical.harmonic import backbone as harmonic_backbone
 from identification.criticism.adequacy import NEARBY_MODE, onset_only
-from identification.criticism.criticism import criticize
+from identification.criticism.criticism import criticize, run_rounds
 from identification.criticism.directions import base_jacobian
 from identification.criticism.plots import plot_history
 from identification.effects import jenkins_path
@@ -598,3 +598,31 @@ def test_true_slip_is_identified_only_when_the_test_passes_its_damping_peak(onse
     assert crit.missing()[0].effect == "microslip", crit.summary()
     nearby = any(NEARBY_MODE in g.effects for g in crit.groups)
     assert (crit.verdict == "explained") == identified and nearby != identified, crit.summary()
+
+
+def test_the_swap_step_replaces_a_stand_in_the_greedy_step_took():
+    """Two effects missing from a linear start: van der Pol damping x²ẋ and a softening
+    x|x| spring (the truth the curves are simulated from). Alone, a Jenkins slip element
+    mimics both (softening and damping rising with amplitude), so the greedy step takes it
+    first; once x|x| is in, van der Pol fits the damping far better than the slip element
+    does, and the swap step puts it in its place. The last model is the truth's structure
+    with its coefficients, and the round's entry records the swap."""
+    truth = linear(van_der_pol=7.5e6, abs_stiffness=-4.8e7)
+    chain = run_rounds(criticize(linear(), population(truth)), 3)
+    assert chain[0].missing()[0].effect == "microslip"  # greedy's first pick: a stand-in
+    last = chain[-1]
+    assert sorted(last.base.model.effects) == sorted(truth.effects)
+    for effect in ("van_der_pol", "abs_stiffness"):
+        assert last.base.model.coefficient(effect) == pytest.approx(
+            truth.coefficient(effect), rel=0.02
+        )
+    assert not last.significant and last.verdict == "nothing missing"
+    rounds = json.loads(last.to_json())["rounds"]
+    assert [r["action"] for r in rounds] == [
+        "start", "+ microslip", "+ abs_stiffness; swap − microslip + van_der_pol",
+    ]  # fmt: skip
+    assert [s.action for s in last.history] == [r["action"] for r in rounds]
+    (kept,) = [s for s in rounds[2]["swaps"] if s["kept"]]
+    assert kept["remove"] == "microslip" and kept["add"] == "van_der_pol"
+    assert kept["delta_chi2"] > 6.63  # the data tell them apart (χ²₁, 1 %)
+    assert all({"significant", "ranking", "groups", "swaps"} <= set(r) for r in rounds)

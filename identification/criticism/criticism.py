@@ -8,6 +8,16 @@ The loop a user runs::
     crit.missing()                      # catalogue effects that explain it, best first
     crit2 = crit.add("microslip")       # refit with it, look again
     plot_history(crit2.history, ax)     # the error falling
+    chain = run_rounds(crit, 3)         # the same, forward-backward stepwise
+
+**Stepwise.** :func:`run_rounds` adds the effect proposed first, then (swap step,
+:meth:`Criticism.swap`) tries removing each effect an earlier round added, or replacing
+it by one of that round's significant runners-up, and keeps a change the same ``χ²``
+supports: a removal that costs less than the calibrated threshold, a replacement that
+gains more than :data:`SEPARATION`. With two effects missing, a stand-in that mimics
+both alone gives way to the true effect once the other is in; and when neither alone
+captures enough of the free-form gain to be proposed, the best admissible one is added
+on trial and kept only if the next round explains the data.
 
 **One statistic.** Everything is judged by one likelihood
 (:mod:`identification.fitting.data`): the residual of the *mean* curve at common
@@ -101,6 +111,7 @@ __all__ = [
     "Group",
     "Step",
     "criticize",
+    "run_rounds",
 ]
 
 FORMAT = "pm-joint/criticism"
@@ -384,6 +395,9 @@ class Criticism:
         The earlier rounds' reports (:meth:`round_report`), first first.
     executor
         Where the candidates' refits run (see :func:`criticize`); None: here.
+    swaps
+        The changes the swap step tried after this round's addition
+        (:meth:`swap`), each with whether it was kept.
     """
 
     def __init__(
@@ -405,6 +419,7 @@ class Criticism:
         action: str | None = None,
         prefitted: Mapping[str, FitResult] | None = None,
         executor: Any = None,
+        swaps: Sequence[Mapping[str, Any]] = (),
     ) -> None:
         if criterion not in ("aic", "bic"):
             raise ValueError(f"criterion must be 'aic' or 'bic', got {criterion!r}")
@@ -424,6 +439,7 @@ class Criticism:
         self.posterior_kind = posterior_kind
         self.candidate_effects = _candidate_list(model, candidates)
         self.previous_rounds = [dict(r) for r in rounds]
+        self.swaps = [dict(s) for s in swaps]
         self._prefitted = dict(prefitted or {})
         self.executor = executor
         self.fit = evaluate(
@@ -801,11 +817,7 @@ class Criticism:
         # Worse beyond the noise: pushed beyond the calibrated scatter by more than χ²₁'s 1 %
         # quantile, and by more than the misfit it had (a channel already far off may move
         # while a second missing effect is still unexplained; doubling is not a trade-off).
-        worse = tuple(
-            g
-            for g in after
-            if after[g] > bounds.get(g, np.inf) and after[g] - before[g] > max(WORSE, before[g])
-        )
+        worse = _worse(before, after, bounds)
         beyond = tuple(g for g in after if after[g] > bounds.get(g, np.inf))
         f, z = self.data.column("frequency_hz"), self.data.column("damping_ratio")
         problems = tuple(admissibility(fit.model, levels, ext[:, f], ext[:, z]))
@@ -1098,21 +1110,141 @@ class Criticism:
                 f"effect {effect!r} is already in the model ({', '.join(self.model.effects)})"
             )
         fit = self._extended_fit(effect, **shape)
+        return self._successor(
+            fit, [c for c in self.candidate_effects if c != effect], self.rounds, f"+ {effect}"
+        )
+
+    def _successor(
+        self,
+        fit: FitResult,
+        candidates: Sequence[str],
+        rounds: Sequence[Mapping[str, Any]],
+        action: str,
+        swaps: Sequence[Mapping[str, Any]] = (),
+        history: Sequence[Step] | None = None,
+    ) -> Criticism:
+        """The criticism of ``fit``'s model on the same data and settings, continuing
+        ``history`` (default: this one's)."""
         return Criticism(
             fit.model,
             self.data,
             method=self.method,
             weights=self.weights or None,
-            candidates=[c for c in self.candidate_effects if c != effect],
+            candidates=candidates,
             criterion=self.criterion,
             alpha=self.alpha,
             n_bootstrap=self.n_bootstrap,
             seed=self.seed,
-            history=self.history,
-            rounds=self.rounds,
-            action=f"+ {effect}",
+            history=self.history if history is None else history,
+            rounds=rounds,
+            action=action,
             prefitted={f"base:{fit.method}": fit},
             executor=self.executor,
+            swaps=swaps,
+        )
+
+    # ------------------------------------------------------------ stepwise loop
+    @property
+    def provisional(self) -> Candidate | None:
+        """The refitted candidate that would be proposed but for its share: significant,
+        admissible, no channel worse beyond its noise, yet capturing less than
+        :data:`PARTLY` of the reference's gain — what one of two missing effects looks
+        like on its own (None when something is proposed or nothing qualifies)."""
+        if self.missing():
+            return None
+        fitting = [
+            c
+            for c in self.candidates
+            if c.fit is not None and c.status == "not explained by the catalogue"
+        ]
+        return max(fitting, key=lambda c: c.delta_chi2) if fitting else None
+
+    def alternatives(self, effect: str) -> list[str]:
+        """What the swap step may put in place of ``effect`` once added: this round's
+        other refitted, significant candidates (:data:`MAX_REFITS` at most), best ``χ²``
+        gain first. Alone, each may be inadmissible or make a channel worse while a second
+        effect is missing; the swap judges it beside that effect."""
+        others = [
+            c for c in self.candidates if c.effect != effect and c.fit is not None and c.significant
+        ]
+        return [c.effect for c in sorted(others, key=lambda c: -c.delta_chi2)]
+
+    def _refit_structure(self, model: JointModel) -> FitResult:
+        """``model``'s structure refitted to the data (a new effect at coefficient 0 gets
+        its start scanned, as :meth:`add` does)."""
+        return fit_backbones(
+            model, self.data, method=self._method_for(model), weights=self.weights or None
+        )
+
+    def swap(self, alternatives: Mapping[str, Sequence[str]], last: str) -> Criticism:
+        """The backward/swap step of forward-backward stepwise selection.
+
+        For each effect added in an earlier round (a key of ``alternatives`` still in the
+        model, not ``last``, the one this round added): refit the model without it, and
+        with it replaced by each of its ``alternatives``. Judged by the same statistic as
+        the add step, this criticism's ``χ²`` in its metric: the effect is removed when
+        removing it costs less than the calibrated :attr:`threshold` (added back, it would
+        not be significant); it is replaced when a replacement gains more than
+        :data:`SEPARATION` (the data tell the two apart), is admissible and makes no channel
+        worse beyond its noise. The best replacement wins over a removal; one change per
+        round. Every trial is recorded in :attr:`swaps` of the criticism returned: this
+        one when nothing changed, else the criticism of the changed model.
+        """
+        model = self.base.model
+        chi2 = self._chi2(self.base)
+        before = self._channel_chi2(self.base)
+        bounds = self.calibration.channel_bounds
+        levels = self.data.levels_m
+        f, z = self.data.column("frequency_hz"), self.data.column("damping_ratio")
+        trials: list[dict[str, Any]] = []
+        fits: list[FitResult] = []
+        for earlier in [e for e in alternatives if e in model and e != last]:
+            without = self._refit_structure(model.without(earlier))
+            cost = self._chi2(without) - chi2
+            trials.append({
+                "remove": earlier, "add": None, "delta_chi2": -cost, "kept": False, "why": "",
+                "keep_if": f"cost < {self.threshold:.4g}",
+            })  # fmt: skip
+            fits.append(without)
+            for other in alternatives[earlier]:
+                if other in model:
+                    continue
+                fit = self._refit_structure(model.without(earlier).with_effect(other, 0.0))
+                table = mean_prediction(self.data, fit.predicted)
+                problems = admissibility(fit.model, levels, table[:, f], table[:, z])
+                worse = _worse(before, self._channel_chi2(fit), bounds)
+                trials.append({
+                    "remove": earlier, "add": other, "delta_chi2": chi2 - self._chi2(fit),
+                    "kept": False, "why": "; ".join([*problems, *(f"{g} worse" for g in worse)]),
+                    "keep_if": f"gain > {SEPARATION:.4g}, admissible, no channel worse",
+                })  # fmt: skip
+                fits.append(fit)
+        replacements = [
+            i for i, t in enumerate(trials)
+            if t["add"] is not None and not t["why"] and t["delta_chi2"] > SEPARATION
+        ]  # fmt: skip
+        removals = [
+            i for i, t in enumerate(trials)
+            if t["add"] is None and -t["delta_chi2"] < self.threshold
+        ]  # fmt: skip
+        if replacements:
+            chosen = max(replacements, key=lambda i: trials[i]["delta_chi2"])
+        elif removals:
+            chosen = max(removals, key=lambda i: trials[i]["delta_chi2"])
+        else:
+            self.swaps = trials
+            return self
+        trials[chosen]["kept"] = True
+        change, fit = trials[chosen], fits[chosen]
+        candidates = [c for c in self.candidate_effects if c != change["add"]]
+        words = f"− {change['remove']}" + (f" + {change['add']}" if change["add"] else "")
+        return self._successor(
+            fit,
+            [*candidates, change["remove"]],
+            self.previous_rounds,
+            f"{self.history[-1].action}; swap {words}",
+            trials,
+            self.history[:-1],  # the swapped model takes this round's step
         )
 
     # ------------------------------------------------------------------- text
@@ -1247,6 +1379,7 @@ class Criticism:
             "explained_share": self.explained_share,
             "ranking": [_ranking_entry(c) for c in self.missing()],
             "groups": [g.to_dict() for g in self.groups],
+            "swaps": self.swaps,
             "summary": self.summary(),
         }
 
@@ -1335,6 +1468,48 @@ class Criticism:
         return paths | write_figures(self, folder)
 
 
+def run_rounds(crit: Criticism, rounds: int) -> list[Criticism]:
+    """Forward-backward stepwise selection from ``crit``: up to ``rounds`` effects added.
+
+    Each round adds the effect proposed first (:meth:`Criticism.missing`), then runs the
+    swap step (:meth:`Criticism.swap`) over the effects added in earlier rounds. When
+    nothing is proposed but a :attr:`~Criticism.provisional` candidate exists (two
+    effects missing: neither explains enough alone), it is added on trial and kept only
+    when the next round's verdict is "explained" (an effect that, beside it, explains the
+    data: two additions); otherwise the loop stops.
+
+    Returns
+    -------
+    list of Criticism
+        The criticism of each model the loop kept, ``crit`` first; the last one's
+        :attr:`~Criticism.rounds` hold every round's report, with its swaps.
+    """
+    chain = [crit]
+    alternatives: dict[str, list[str]] = {}
+    added = 0
+    while added < rounds:
+        crit = chain[-1]
+        proposed = crit.missing()
+        if not proposed:
+            trial = crit.provisional
+            if trial is None or added + 2 > rounds:
+                break
+            tried = crit.add(trial.effect)
+            # kept only when the pair explains the data: out-of-catalogue physics, which
+            # catalogue terms partly mimic one after another, is not fitted term by term
+            if tried.verdict != "explained":
+                break
+            alternatives[trial.effect] = crit.alternatives(trial.effect)
+            chain.append(tried)
+            added += 1
+            continue
+        effect = proposed[0].effect
+        alternatives[effect] = crit.alternatives(effect)
+        chain.append(crit.add(effect).swap(alternatives, effect))
+        added += 1
+    return chain
+
+
 def _separates_nearby_mode(model: JointModel) -> str:
     """What separates a slip onset from a nearby mode (see :func:`onset_only`)."""
     shape = model["microslip"].shape
@@ -1351,6 +1526,17 @@ def _nearby_mode_words(onset: str, model: JointModel) -> str:
         "a nearby mode exchanging energy with this one as the backbone approaches it "
         f"({onset}); one sensor cannot tell them apart — what would: "
         f"{_separates_nearby_mode(model)}"
+    )
+
+
+def _worse(
+    before: Mapping[str, float], after: Mapping[str, float], bounds: Mapping[str, float]
+) -> tuple[str, ...]:
+    """Channel groups a change makes worse beyond their noise (see :data:`WORSE`)."""
+    return tuple(
+        g
+        for g in after
+        if after[g] > bounds.get(g, np.inf) and after[g] - before[g] > max(WORSE, before[g])
     )
 
 
