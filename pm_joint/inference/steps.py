@@ -13,6 +13,13 @@ draws (Haario et al.'s adaptive Metropolis, re-estimated over doubling
 windows as Stan does for its mass matrix), scaled by 2.38/√d and tuned to
 PyMC's acceptance band. After tuning, the proposal is fixed, so the draws are
 those of a plain Metropolis–Hastings chain.
+
+PyMC's Metropolis scores a proposal by ``logp(q) − logp(q0)``, evaluating the
+model at both points every step, though the current point ``q0`` was scored
+when it was proposed. Where the step moves every variable (nothing else
+changes the model between steps), :class:`CovarianceMetropolis` keeps the
+log density of the current point instead (:class:`KeptLogp`): one model
+evaluation per proposal, the same chain.
 """
 
 from __future__ import annotations
@@ -22,6 +29,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 import pymc as pm
+from pymc.pytensorf import compile as compile_pytensor
+from pymc.pytensorf import join_nonshared_inputs, make_shared_replacements
 from pymc.step_methods.metropolis import (
     MetropolisState,
     MultivariateNormalProposal,
@@ -29,7 +38,7 @@ from pymc.step_methods.metropolis import (
 )
 from pymc.step_methods.state import dataclass_state
 
-__all__ = ["CovarianceMetropolis"]
+__all__ = ["CovarianceMetropolis", "KeptLogp"]
 
 
 @dataclass_state
@@ -91,12 +100,24 @@ class CovarianceMetropolis(pm.Metropolis):
         if not (pilot_fraction > 0 and final_fraction >= 0 and pilot_fraction + final_fraction < 1):
             raise ValueError("pilot_fraction and final_fraction must leave room for adaptation")
         super().__init__(vars, **kwargs)
+        self._keep_current_logp(kwargs)
         self.adapt_covariance = adapt_covariance
         self.pilot_fraction = pilot_fraction
         self.final_fraction = final_fraction
         self.n_dims = int(self.proposal_dist.s.size)
         self.tune_steps = None  # told by the sampler (set_tune_steps); else no covariance
         self._reset_adaptation()
+
+    def _keep_current_logp(self, kwargs) -> None:
+        """Score proposals with :class:`KeptLogp` where the step moves every variable."""
+        model = pm.modelcontext(kwargs.get("model"))
+        point = kwargs.get("initial_point") or model.initial_point()
+        if make_shared_replacements(point, self.vars, model):
+            return  # another step moves the rest: the current point's logp can change under us
+        [logp], joined = join_nonshared_inputs(point, [model.logp()], self.vars, {})
+        function = compile_pytensor([joined], logp, **(kwargs.get("compile_kwargs") or {}))
+        function.trust_input = True
+        self.delta_logp = KeptLogp(function)
 
     # -- tuning schedule --------------------------------------------------------
 
@@ -167,6 +188,34 @@ class CovarianceMetropolis(pm.Metropolis):
                 if covariance is not None:
                     self._set_joint(covariance)
         return q, stats
+
+
+class KeptLogp:
+    """``logp(q) − logp(q0)`` as PyMC's Metropolis asks for it, each point scored once.
+
+    The log densities of the last two points scored are kept: a Metropolis
+    step's current point is either the last proposal (accepted) or the point
+    before it (rejected), so only the new proposal is evaluated. Exact: the
+    model's log density is a deterministic function of the point.
+    """
+
+    def __init__(self, logp) -> None:
+        self.logp = logp
+        self._kept: dict[bytes, float] = {}
+
+    def __call__(self, q: np.ndarray, q0: np.ndarray) -> float:
+        current = self._score(q0)  # first, so the proposal's entry evicts the other one
+        return self._score(q) - current
+
+    def _score(self, q: np.ndarray) -> float:
+        key = q.tobytes()
+        value = self._kept.pop(key, None)
+        if value is None:
+            value = float(self.logp(q))
+        self._kept[key] = value  # most recent last
+        if len(self._kept) > 2:
+            del self._kept[next(iter(self._kept))]
+        return value
 
 
 def _regularised_covariance(draws: np.ndarray) -> np.ndarray | None:
