@@ -44,9 +44,9 @@ class DemoSize:
 #: ``full`` is the paper's campaign: 25 measured backbones, 500 training curves; the
 #: population matching with the surrogate's default sampler
 #: (:data:`~pm_joint.inference.SAMPLER_DEFAULTS`, whose reason the report prints; the
-#: paper's Metropolis, its proposal covariance learned while tuning), two chains of
-#: 30 000 on the two cores (``draws=None``: the sampler's default); the hierarchical
-#: model with nutpie, two chains of 1 000.
+#: paper's Metropolis, its proposal covariance learned while tuning, proposing in the prior
+#: box's coordinates), two chains of 30 000 on the two cores (``draws=None``: the
+#: sampler's default); the hierarchical model with nutpie, two chains of 1 000.
 SIZES = {
     "full": DemoSize(
         assemblies=25, n_levels=10, sindy_records=3, surrogate_curves=500, surrogate_epochs=None,

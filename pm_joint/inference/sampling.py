@@ -1,10 +1,10 @@
 """Sampling the updating models by sampler name, to memory or to a trace folder as it goes.
 
 :func:`sample` runs PyMC's samplers (Metropolis as in the paper, with its proposal
-covariance learned while tuning; DEMetropolisZ; NUTS) or nutpie's NUTS and
-returns an arviz DataTree, optionally writing the draws to a folder as they come
-(:mod:`~pm_joint.inference.traces`); :func:`continue_sampling` carries a stopped
-run on from that folder.
+covariance learned while tuning, in the prior box's coordinates; DEMetropolisZ;
+NUTS) or nutpie's NUTS and returns an arviz DataTree, optionally writing the
+draws to a folder as they come (:mod:`~pm_joint.inference.traces`);
+:func:`continue_sampling` carries a stopped run on from that folder.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import pymc as pm
 import xarray as xr
 from pymc.blocking import DictToArrayBijection
 
-from pm_joint.inference.steps import CovarianceMetropolis
+from pm_joint.inference.steps import CovarianceMetropolis, KeptLogp
 from pm_joint.inference.storage import attach_density, load_posterior
 from pm_joint.inference.traces import DrawWriter, start_trace
 
@@ -44,12 +44,13 @@ POPULATION_MODELS = ("matching", "hierarchical")
 SAMPLER_DEFAULTS = {
     ("matching", "surrogate"): {
         "sampler": "metropolis", "draws": 30_000, "tune": 3_000,
-        "reason": "the paper's sampler, its proposal covariance learned while tuning",
+        "reason": "the paper's sampler, its proposal covariance learned while tuning, "
+        "proposing in the prior box's coordinates",
     },
     ("matching", "pll"): {
         "sampler": "metropolis", "draws": 30_000, "tune": 3_000,
         "reason": "the PLL simulator has no gradient: the paper's Metropolis, its proposal "
-        "covariance learned while tuning",
+        "covariance learned while tuning, proposing in the prior box's coordinates",
     },
     ("matching", "harmonic"): {
         "sampler": "nutpie", "draws": 2_000, "tune": 1_000,
@@ -86,11 +87,13 @@ def sample(
     sampler
         ``"metropolis"``: PyMC's Metropolis, the paper's sampler, with its proposal
         covariance learned while tuning (:class:`~pm_joint.inference.steps.CovarianceMetropolis`:
-        a coordinate-wise pilot, then joint proposals; ``step_options=
+        a coordinate-wise pilot, then joint proposals, in the prior box's linear
+        coordinates, one model evaluation per proposal; ``step_options=
         {"adapt_covariance": False}`` keeps the paper's coordinate-wise proposals
-        throughout). ``"demetropolisz"``: PyMC's
-        differential-evolution Metropolis. ``"nuts"``: PyMC's NUTS, ``"nutpie"``: nutpie's
-        NUTS (numba backend); both need a differentiable forward model.
+        throughout, ``{"coordinates": "value"}`` walks in PyMC's logit coordinates).
+        ``"demetropolisz"``: PyMC's differential-evolution Metropolis. ``"nuts"``:
+        PyMC's NUTS, ``"nutpie"``: nutpie's NUTS (numba backend); both need a
+        differentiable forward model.
     trace
         A folder: draws are written there as they are taken
         (:class:`~pm_joint.inference.traces.DrawWriter`, zarr 2 or 3), so an
@@ -264,5 +267,7 @@ def _compile_now(step, point: Mapping[str, np.ndarray]) -> None:
         q = DictToArrayBijection.map({v.name: point[v.name] for v in method.vars}).data
         if isinstance(method, pm.NUTS):
             method._logp_dlogp_func._pytensor_function(q)
+        elif isinstance(method.delta_logp, KeptLogp):
+            method.delta_logp.logp(q)  # the model's logp, in the value variables
         else:
             method.delta_logp(q, q)
