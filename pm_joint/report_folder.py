@@ -181,6 +181,8 @@ def report(
     else:
         stored = idata.attrs.get("loo")
         content["loo"] = json.loads(stored) if stored else None
+        stored = idata.attrs.get("varying_choice")
+        content["identifiability"] = json.loads(stored) if stored else None
         content["level_pdfs"] = {}
     content = _jsonable(
         {

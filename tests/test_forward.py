@@ -107,6 +107,27 @@ def test_graph_equals_the_single_harmonic_backbone(name):
 
 
 @pytest.mark.parametrize("name", list(MODELS))
+def test_pointwise_graph_pairs_each_row_with_its_amplitude(name):
+    # The hierarchical model's mode: row i of θ at amplitude i only.
+    model = MODELS[name]
+    names = model.parameter_names
+    rng = np.random.default_rng(3)
+    values = np.array(list(model.parameters.values())) * (
+        1 + 0.03 * rng.standard_normal((AMPLITUDES_M.size, len(names)))
+    )
+    theta = pt.matrix("theta")
+    function = pytensor.function(
+        [theta], harmonic_backbone_graph(model, theta, names, AMPLITUDES_M, pointwise=True)
+    )
+    out = function(values)
+    expected = backbone(model, AMPLITUDES_M, parameters=values, names=names, method="single")
+    rows = np.arange(AMPLITUDES_M.size)
+    assert out.shape == (AMPLITUDES_M.size, len(BACKBONE_COLUMNS))
+    np.testing.assert_allclose(out[:, 1], expected.frequency_hz[rows, rows], rtol=1e-10)
+    np.testing.assert_allclose(out[:, 2], expected.damping_ratio[rows, rows], rtol=1e-10)
+
+
+@pytest.mark.parametrize("name", list(MODELS))
 def test_graph_gradient_equals_central_differences(name):
     model = MODELS[name]
     names = model.parameter_names

@@ -57,6 +57,8 @@ def harmonic_backbone_graph(
     theta: Any,
     names: Sequence[str] | None,
     amplitudes_m: ArrayLike,
+    *,
+    pointwise: bool = False,
 ) -> pt.TensorVariable:
     """Single-harmonic backbone of ``model`` as a native, differentiable pytensor graph.
 
@@ -81,13 +83,18 @@ def harmonic_backbone_graph(
         so their columns get zero gradient.
     amplitudes_m
         Fundamental amplitudes of the relative displacement (m), 1-D, > 0.
+    pointwise
+        Pair the amplitudes with θ's rows instead of evaluating every row at every
+        amplitude: θ ``(n_amp, len(names))``, one amplitude per row, output
+        ``(n_amp, 3)``. A hierarchical model scores each curve at its own points this
+        way, instead of every curve at every curve's points.
 
     Returns
     -------
     TensorVariable
-        ``(..., n_amp, 3)``, columns :data:`BACKBONE_COLUMNS`; NaN frequency and
-        damping where there is no backbone, and for whole rows whose shape
-        parameters are not > 0.
+        ``(..., n_amp, 3)`` (pointwise: ``(n_amp, 3)``), columns
+        :data:`BACKBONE_COLUMNS`; NaN frequency and damping where there is no
+        backbone, and for whole rows whose shape parameters are not > 0.
     """
     names = checked_names(model, names)
     amplitudes = positive_vector(amplitudes_m, "amplitudes_m")
@@ -97,9 +104,11 @@ def harmonic_backbone_graph(
             f"θ must have a last axis of {len(names)} parameters ({', '.join(names)}), "
             f"got shape {theta.type.shape}"
         )
-    # Parameters get a trailing axis to broadcast against the amplitude grid.
+    # Parameters get a trailing axis to broadcast against the amplitude grid (pointwise:
+    # each row already stands at its own amplitude).
+    grid_axis = () if pointwise else (None,)
     value = {
-        name: theta[..., names.index(name), None] if name in names else pt.constant(v)
+        name: theta[(..., names.index(name), *grid_axis)] if name in names else pt.constant(v)
         for name, v in model.parameters.items()
     }
     a = pt.constant(amplitudes)

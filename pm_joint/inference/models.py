@@ -350,8 +350,6 @@ def hierarchical_model(
     if not channels or any(c not in ("frequency_hz", "damping_ratio") for c in channels):
         raise ValueError(f"channels must be 'frequency_hz' and/or 'damping_ratio', got {channels}")
     curve, amplitude, values = _curve_points(measured, amplitudes_m)
-    # One amplitude grid for every curve; each point then picks its curve and amplitude.
-    grid, at = np.unique(amplitude, return_inverse=True)
     theta0 = np.array([template[n] for n in names])
     log_relative_amplitude = np.log(amplitude) - np.mean(np.log(amplitude))
     coords = {"curve": measured.labels, "parameter": names, "point": np.arange(amplitude.size)}
@@ -366,7 +364,8 @@ def hierarchical_model(
         theta = pm.Deterministic("theta", theta0 * pt.exp(eta), dims=("curve", "parameter"))
         for j, name in enumerate(names):
             pm.Deterministic(f"{name}{POPULATION_SUFFIX}", theta0[j] * pt.exp(mu[j]))
-        backbone = harmonic_backbone_graph(model, theta, names, grid)
+        # Each curve at its own points only (not every curve at every curve's points).
+        backbone = harmonic_backbone_graph(model, theta[curve], names, amplitude, pointwise=True)
         pm.Data("amplitude_m", amplitude, dims="point")
         pm.Data("curve_index", curve, dims="point")
         for channel in channels:
@@ -376,7 +375,7 @@ def hierarchical_model(
             if heteroscedastic:
                 slope = pm.Normal(f"{channel}_noise_slope", 0.0, 1.0)
                 noise = noise * pt.exp(slope * log_relative_amplitude)
-            predicted = backbone[curve, at, BACKBONE_COLUMNS.index(channel)]
+            predicted = backbone[:, BACKBONE_COLUMNS.index(channel)]
             pm.Normal(channel, predicted, noise, observed=observed, dims="point")
     pm_model.population_model = HIERARCHICAL  # sample() keeps it with the draws
     pm_model.template = model
