@@ -234,14 +234,14 @@ def test_hierarchical_model_is_calibrated_on_pll_campaigns():
     coverage = population_coverage(
         DUFFING, NAMES, np.geomspace(0.3, 5.0, 8), 1e-3 * np.geomspace(0.12, 1.1, 6),
         n_campaigns=5, n_curves=6, location_scale=0.02, population_scale=0.05,
-        channels=("frequency_hz",), draws=300, tune=800, progress=False,
+        channels=("frequency_hz",), draws=300, tune=800, progress=False, centred=False,
     )  # fmt: skip
     print(coverage)
     assert coverage.bounds() == (3, 5)  # Binomial(5, 0.9): P(X ≤ 2) = 0.0086
     assert coverage.within_bounds()
-    # NUTS meets the log-spread funnel now and then: 0–29 divergences per campaign of 600
-    # draws were seen on the same seeds. Coverage is the claim; the divergences stay a
-    # small share of all draws (issue #17 keeps the reparameterisation open).
+    # Non-centred, as the CLI runs it: the centred form met the log-spread funnel with 22–76
+    # divergences over these 5 campaigns (the count changed from run to run on the same
+    # seeds); the non-centred one had 2. Coverage is the claim; divergences stay rare.
     assert coverage.divergences.sum() <= 0.02 * 5 * 2 * 300
 
 
