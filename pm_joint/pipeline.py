@@ -24,6 +24,7 @@ import numpy as np
 import xarray as xr
 
 from identification.analytical import harmonic, pll
+from identification.criticism.criticism import run_rounds
 from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.columns import ColumnCampaign
@@ -253,8 +254,6 @@ def criticize_campaign(
     if measured is None:
         workspace = folder if isinstance(folder, Workspace) else Workspace(folder)
         measured = workspace.backbones
-    from identification.criticism.criticism import run_rounds
-
     crit = criticize(model, measured, posterior=posterior, executor=executor)
     crit = run_rounds(crit, rounds)[-1]
     crit.write(out)

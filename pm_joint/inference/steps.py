@@ -40,6 +40,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 import pymc as pm
+import scipy.special
 from pymc.blocking import RaveledVars
 from pymc.logprob.transforms import IntervalTransform
 from pymc.pytensorf import compile as compile_pytensor
@@ -299,14 +300,14 @@ def _bounded_indices(model: pm.Model, value_vars, point) -> np.ndarray:
 def _to_box(z: np.ndarray, box: np.ndarray) -> np.ndarray:
     """Value-space point → working point: the box indices as fractions sigmoid(z)."""
     w = np.array(z, dtype=float)
-    w[box] = 0.5 * (1.0 + np.tanh(0.5 * w[box]))  # sigmoid without overflow
+    w[box] = scipy.special.expit(w[box])
     return w
 
 
 def _from_box(w: np.ndarray, box: np.ndarray) -> np.ndarray:
     """Working point → value-space point: logit of the box fractions."""
     z = np.array(w, dtype=float)
-    z[box] = np.log(z[box]) - np.log1p(-z[box])
+    z[box] = scipy.special.logit(z[box])
     return z
 
 
