@@ -9,7 +9,7 @@ population spreads for the coefficients the rig varies, ± 10 % for the
 microslip stiffness. The same posterior is sampled through two forward models:
 
 - ``surrogate``: a network trained here on that box (harmonic-balance backbones
-  on 41 response amplitudes over the measured range with the ``has_backbone``
+  on 41 response amplitudes over those ≥ 3 measured curves cover, with the ``has_backbone``
   mask, as the demo's; its size, in weights and layers, is printed and in the
   JSON), run by onnxruntime for the Metropolis samplers and compiled as a
   native pytensor graph (:class:`pm_joint.forward.SurrogateGraph`) for the
@@ -54,6 +54,7 @@ from surrogates import (
     train_surrogate,
 )
 from surrogates.dataset import generate_dataset
+from surrogates.grid import measured_grid
 
 #: Relative half-width of the box of the coefficient the rig does not vary.
 FIXED_SPREAD = 0.1
@@ -92,11 +93,9 @@ def train(
 ) -> tuple[SurrogateRuntime, dict]:
     """The amplitude-grid surrogate over the prior box, with its size and accuracy."""
     start = time.perf_counter()
-    low = min(b.amplitude_range_m[0] for b in measured)
-    high = max(b.amplitude_range_m[1] for b in measured)
     data = generate_dataset(
         rig.model, NAMES, TRAINING_CURVES, representation="amplitude_grid", bounds=bounds,
-        amplitude_range_m=(low, high), progress=False,
+        amplitude_range_m=measured_grid(measured).range_m, progress=False,
     )  # fmt: skip
     config = TrainingConfig(net=NET, max_epochs=400, finetune_epochs=400, progress=False)
     trained = train_surrogate(data.X, data.Y, data.spec, config)
