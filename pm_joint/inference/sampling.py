@@ -54,9 +54,9 @@ SAMPLER_DEFAULTS = {
     },
     ("matching", "harmonic"): {
         "sampler": "demetropolisz", "draws": 30_000, "tune": 5_000,
-        "reason": "the best min-ESS/s measured on this forward model: DEMetropolisZ 154/s "
-        "against pm-joint's Metropolis 123, PyMC's NUTS 80 and nutpie 48 on a 5-parameter "
-        "rig posterior (bench/sampling.py, 2026-11-26)",
+        "reason": "the best min-ESS/s measured on this forward model: DEMetropolisZ 195/s "
+        "against pm-joint's Metropolis 154, PyMC's NUTS 130 and nutpie 92 on a 5-parameter "
+        "rig posterior (bench/results/sampling.json, 2026-11-26)",
     },
     ("hierarchical", "harmonic"): {
         "sampler": "nutpie", "draws": 1_000, "tune": 1_000,
