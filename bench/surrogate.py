@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from scipy import stats
 
 from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import BackboneSet
@@ -164,25 +165,70 @@ def multiply_adds(sizes: dict) -> int:
     return int(ffnn + decoder)
 
 
-def headline(report: dict, origin: str) -> dict:
-    """Per channel: RMSE of the surrogate and baselines, ratios, targets met."""
+def scatter_interval(n_curves: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """95 % interval of σ / s for a sample SD ``s`` of ``n_curves`` curves (χ², n − 1 dof).
+
+    The yardstick's own sampling error: with 3 curves (the grid's ends) the true
+    assembly SD lies between 0.52 and 6.3 times the measured one; with 25, 0.78–1.39.
+    """
+    dof = np.asarray(n_curves, dtype=float) - 1
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.sqrt(dof / stats.chi2.ppf(0.975, dof)), np.sqrt(dof / stats.chi2.ppf(0.025, dof))
+
+
+def yardstick(to_scatter: list, n_curves: np.ndarray) -> dict:
+    """Ratios to the scatter beside what the scatter's sampling error allows.
+
+    ``to_scatter_ci95_per_level``: the interval of RMSE / σ given the scatter of
+    the curves covering each amplitude; ``to_scatter_max_10_curves``: the worst
+    ratio over the amplitudes at least 10 curves cover (σ known to about ±40 %).
+    The target stays on the measured scatter (``to_scatter_max``).
+    """
+    ratio = np.array([np.nan if v is None else v for v in to_scatter or []], dtype=float)
+    if ratio.size == 0:
+        return {}
+    low, high = scatter_interval(n_curves)
+    robust = ratio[(n_curves >= 10) & np.isfinite(ratio)]
+    return {
+        "to_scatter_ci95_per_level": [
+            None if not np.isfinite(r) else [float(r / h), float(r / lo)]
+            for r, lo, h in zip(ratio, low, high, strict=True)
+        ],
+        "to_scatter_max_10_curves": float(robust.max()) if robust.size else None,
+    }
+
+
+def headline(report: dict, origin: str, n_curves: np.ndarray) -> dict:
+    """Per channel: RMSE of the surrogate and baselines, ratios, targets met.
+
+    ``n_curves``: measured curves covering each grid amplitude (the scatter's sample size).
+    """
     part = report.get(origin)
     if part is None:
         return {}
     rows = {}
     for channel in CHANNELS:
         ratios, models = part["ratios"][channel], part["models"]
-        surrogate, linear = (models[m][channel]["rmse_per_level"] for m in ("surrogate", "linear"))
+        surrogate, linear, cubic = (
+            models[m][channel]["rmse_per_level"] for m in ("surrogate", "linear", "cubic")
+        )
         rows[channel] = {
-            # Per grid amplitude: where the worst ratio sits, and the linear baseline there.
+            # Per grid amplitude: where the worst ratio sits, and the baselines there.
             "rmse_per_level_surrogate": surrogate,
             "rmse_per_level_linear": linear,
+            "rmse_per_level_cubic": cubic,
+            # The degree the cubic baseline (and the cubic head, fitted on the same rows)
+            # carries at each amplitude: lower where masked values leave too few rows.
+            "cubic_degree_per_level": report["regression_degrees"]["cubic"][channel],
+            "n_test_per_level": models["surrogate"][channel]["n_per_level"],
             "to_linear_per_level": [
                 None if s is None or not lin else s / lin
                 for s, lin in zip(surrogate, linear, strict=True)
             ],
             "to_scatter_per_level": ratios.get("to_scatter_per_level"),
             "linear_to_scatter_per_level": ratios.get("linear_to_scatter_per_level"),
+            "cubic_to_scatter_per_level": ratios.get("cubic_to_scatter_per_level"),
+            **yardstick(ratios.get("to_scatter_per_level"), n_curves),
             "worst_level": ratios.get("worst_level"),
             **{f"rmse_{m}": part["models"][m][channel]["rmse"] for m in part["models"]},
             "to_linear": ratios["to_linear"],
@@ -264,8 +310,8 @@ def run_box(
         "train_epochs": {stage: len(r) for stage, r in surrogate.history.items()},
         "best_epochs": surrogate.best_epochs,
         "network": surrogate.sizes,
-        "analytical": headline(report, "analytical"),
-        "measured": headline(report, "measured"),
+        "analytical": headline(report, "analytical", grid.curves_covering),
+        "measured": headline(report, "measured", grid.curves_covering),
         "table5": report["table5"],
         "onnx_vs_torch_max_abs_rel": onnx_vs_torch,
         "predict_100": call_times_ms(lambda: runtime.predict(batch), args.repeats),
@@ -307,6 +353,22 @@ def print_box(figures: dict) -> None:
                 f"{fmt(r['to_linear']):>9s}{fmt(r['to_cubic']):>8s}  "
                 f"{fmt(r['to_scatter_max'])}, {fmt(r['linear_to_scatter_max'])}, "
                 f"{fmt(r['cubic_to_scatter_max'])}"
+            )
+        for channel in CHANNELS:
+            r = rows[channel]
+            ratio = r["to_scatter_per_level"] or []
+            if not ratio:
+                continue
+            show = lambda vs: " ".join("—" if v is None else f"{v:.2g}" for v in vs)  # noqa: E731
+            worst = r["worst_level"]
+            interval = r["to_scatter_ci95_per_level"][worst]
+            print(
+                f"     {channel} ÷scatter per amplitude, first 6: {show(ratio[:6])}; last 3: "
+                f"{show(ratio[-3:])}; worst (amplitude {worst}): 95 % interval from the "
+                f"scatter's sampling error {interval[0]:.2g}–{interval[1]:.2g}; "
+                "max over amplitudes ≥ 10 curves cover "
+                f"{fmt(r['to_scatter_max_10_curves'])}; cubic degree at the ends "
+                f"{r['cubic_degree_per_level'][0]}, {r['cubic_degree_per_level'][-1]}"
             )
         mask = rows["has_backbone"]
         print(
@@ -421,6 +483,13 @@ def main() -> None:
             f"{box}_frequency_to_cubic": frequency["to_cubic"],
             f"{box}_frequency_rmse_hz_cubic": frequency["rmse_cubic"],
             f"{box}_frequency_to_scatter_max": frequency["to_scatter_max"],
+            f"{box}_frequency_to_scatter_max_10_curves": frequency["to_scatter_max_10_curves"],
+            **{
+                f"{box}_{channel}_{key}": figures["analytical"][channel][key]
+                for channel in CHANNELS[1:]
+                for key in ("to_linear", "to_scatter_max", "to_scatter_max_10_curves")
+            },
+            f"{box}_n_curves": figures["counts"]["requested"],
             f"{box}_mse_amplitude_mm2": figures["table5"]["surrogate"]["mse_amplitude_mm2"],
             f"{box}_train_cpu_s": figures["train_cpu_s"],
             f"{box}_predict_100_ms": figures["predict_100"]["cpu_median_ms"],

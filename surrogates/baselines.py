@@ -120,11 +120,16 @@ class PolynomialBaseline:
         :func:`monomial_factors` (intercept, then one slope per parameter scaled
         to [0, 1] over the box, then the higher degrees); an entry with too few
         weighted training values has zeros beyond the degree it could carry.
+    carried_degree
+        ``(n_levels, n_channels)`` the degree each entry carries (≤ ``degree``;
+        0: the mean alone): where masked values leave too few weighted training
+        rows, e.g. at the top of the amplitude grid, a "cubic" is quadratic.
     """
 
     spec: SurrogateSpec
     degree: int
     coefficients: np.ndarray
+    carried_degree: np.ndarray
 
     @classmethod
     def fit(
@@ -141,6 +146,7 @@ class PolynomialBaseline:
         sizes = [math.comb(spec.n_params + d, d) for d in range(1, degree + 1)]
         coefficients = np.zeros((design.shape[1], *spec.backbone_shape))
         coefficients[0] = _weighted_means(y, w)
+        carried = np.zeros(spec.backbone_shape, dtype=int)
         for level, channel in np.ndindex(*spec.backbone_shape):
             root = np.sqrt(w[:, level, channel])
             used = root > 0
@@ -155,7 +161,8 @@ class PolynomialBaseline:
             )[0]
             coefficients[:, level, channel] = 0.0
             coefficients[:columns, level, channel] = solution
-        return cls(spec, degree, coefficients)
+            carried[level, channel] = len(fitting)
+        return cls(spec, degree, coefficients, carried)
 
     def predict(self, parameters: np.ndarray) -> np.ndarray:
         """``(n, n_levels, n_channels)`` predictions."""

@@ -264,7 +264,9 @@ def accuracy_report(
     -------
     dict
         Plain JSON: ``split``, ``counts`` (the dataset's curves per origin and
-        split), ``representation``, ``scatter``, ``targets``, and per origin
+        split), ``representation``, ``scatter``, ``targets``,
+        ``regression_degrees`` (per regression baseline and value channel, the
+        degree each grid point carries), and per origin
         (``analytical``, ``measured``; None when the split has no such curve)
         ``n_curves``, ``models`` (:func:`channel_errors` of ``surrogate``,
         ``linear``, ``cubic``, ``mean_curve``), ``ratios`` and ``targets_met``; ``table5``:
@@ -292,6 +294,16 @@ def accuracy_report(
         if scatter is None
         else {k: [_json_float(x) for x in v] for k, v in scatter.items()},
         "targets": TARGETS,
+        # Where masked values thin the training rows a regression may carry a lower degree
+        # than it names (PolynomialBaseline's rule): the cubic baseline, and a cubic head fitted
+        # on the same rows, can be quadratic at the top of the grid.
+        "regression_degrees": {
+            name: {
+                c: fitted[name].carried_degree[:, spec.channel_index(c)].tolist()
+                for c in spec.value_channels
+            }
+            for name in REGRESSION_BASELINES
+        },
     }
     for origin, select in (("analytical", ~measured), ("measured", measured)):
         if not select.any():

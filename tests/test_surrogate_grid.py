@@ -296,6 +296,17 @@ def test_baselines_are_fitted_on_the_train_split_alone():
     # Too few rows for a cubic: an entry keeps the highest degree it can carry.
     few = PolynomialBaseline.fit(data.spec, data.X[train[:12]], data.Y[train[:12]], 1.0, 3)
     assert np.all(few.coefficients[6:] == 0) and np.any(few.coefficients[3:6] != 0)
+    # The degree each entry carries, by the rule's count (2 rows per coefficient: 20 for
+    # the 10 cubic monomials of 2 parameters, 12 for the 6 quadratic, 6 for the 3 linear).
+    rows = (weights[train] > 0).sum(axis=0)
+    by_rule = np.select([rows >= 20, rows >= 12, rows >= 6], [3, 2, 1], 0)
+    np.testing.assert_array_equal(cubic.carried_degree, by_rule)
+    assert cubic.carried_degree[level, channel] == 3 and few.carried_degree.max() == 2
+    assert report["regression_degrees"]["cubic"]["frequency_hz"] == by_rule[:, channel].tolist()
+    assert (
+        report["regression_degrees"]["linear"]["frequency_hz"]
+        == np.minimum(by_rule[:, channel], 1).tolist()
+    )
 
 
 def test_amplitudes_at_levels_invert_the_closed_form():
