@@ -130,6 +130,10 @@ def _sidecar(surrogate: Surrogate, graph: bytes, opset: int) -> dict[str, Any]:
             },
             "head": {
                 "degree": surrogate.model.head_degree,
+                # Lower at grid points with too few training rows (levels x channels).
+                "carried_degree": None
+                if surrogate.head_carried_degree is None
+                else surrogate.head_carried_degree.tolist(),
                 "kind": "per (level, channel) polynomial in the box-scaled parameters, added "
                 "in physical units; the networks learn its residual (degree 0: no head)",
             },

@@ -57,7 +57,7 @@ from numpy.typing import ArrayLike
 from torch import nn
 from tqdm.auto import tqdm
 
-from surrogates.baselines import PolynomialBaseline
+from surrogates.baselines import ROWS_PER_COEFFICIENT, PolynomialBaseline
 from surrogates.dataset import MEASURED_PREFIX, BackboneDataset
 from surrogates.evaluate import accuracy_report, backbone_metrics, channel_errors
 from surrogates.nets import (
@@ -180,6 +180,11 @@ class Surrogate:
     test_report
         :func:`~surrogates.evaluate.accuracy_report` on the dataset's test split
         (:func:`train_on_dataset`), or None.
+    head_carried_degree
+        ``(n_levels, n_channels)`` the degree the polynomial head carries at each
+        grid point (:attr:`~surrogates.baselines.PolynomialBaseline.carried_degree`;
+        lower than ``config.head_degree`` where masked values leave too few
+        training rows; 0 in the mask channel, which has no head), or None without a head.
     """
 
     spec: SurrogateSpec
@@ -193,6 +198,7 @@ class Surrogate:
     train_seconds: float
     data: dict[str, Any] = field(default_factory=dict)
     test_report: dict[str, Any] | None = None
+    head_carried_degree: np.ndarray | None = None
 
     def predict(self, parameters: Any) -> np.ndarray:
         """Backbones ``(n, n_levels, n_channels)`` for physical ``(n, n_params)`` parameters."""
@@ -325,6 +331,20 @@ def train_surrogate(
         regression = PolynomialBaseline.fit(spec, x[train], y[train], w[train], config.head_degree)
         regression.coefficients[..., probability] = 0.0  # the mask stays the network's alone
         head = (config.head_degree, regression.coefficients)
+        carried = np.where(probability, 0, regression.carried_degree)
+        short = (carried[:, ~probability] < config.head_degree).any(axis=1)
+        if short.any():
+            # A lower degree at a few grid points is a step in accuracy along the curve
+            # (the ±50 % bench box at 475 curves: quadratic at the top amplitude only).
+            degree = config.head_degree
+            coefficients = math.comb(spec.n_params + degree, degree)
+            warnings.warn(
+                f"the degree-{degree} head carries a lower degree at {int(short.sum())} of "
+                f"{spec.n_levels} grid points (indices {np.flatnonzero(short).tolist()}): "
+                f"fewer than {ROWS_PER_COEFFICIENT} × {coefficients} training rows with a "
+                "value there; train on more curves",
+                stacklevel=2,
+            )
     # What the networks learn, standardised: the curves, or the head's residual (taken
     # in float64 here: in the network's float32 it would cancel).
     learnt = y if head is None else y - regression.predict(x)
@@ -377,8 +397,9 @@ def train_surrogate(
     model.cpu().eval()
     autoencoder.cpu().eval()
     surrogate = Surrogate(
-        spec, model, autoencoder, config, history, {}, len(train), len(valid), 0.0
-    )
+        spec, model, autoencoder, config, history, {}, len(train), len(valid), 0.0,
+        head_carried_degree=None if head is None else carried,
+    )  # fmt: skip
     predicted = surrogate.predict(x[valid])
     surrogate.metrics = (
         backbone_metrics(predicted, y[valid], spec)

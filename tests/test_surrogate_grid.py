@@ -386,6 +386,25 @@ def test_the_exported_grid_surrogate_carries_its_test_figures(trained, tmp_path)
     assert "worst of the" in section.text  # says over how many amplitudes the scatter is known
 
 
+def test_a_head_short_of_rows_says_so_and_the_sidecar_records_its_degrees(tmp_path):
+    # 30 curves, 20 % validation and test: 18 training rows at most, fewer at the top where
+    # the box folds; a cubic in 2 parameters needs 2 × 10 rows, a quadratic 2 × 6.
+    data = grid_data(30, seed=1).with_splits(0.2, 0.2, seed=0)
+    train = data.in_split("train")
+    rows = (data.loss_weights()[train] > 0).sum(axis=0)
+    by_rule = np.select([rows >= 20, rows >= 12, rows >= 6], [3, 2, 1], 0)
+    by_rule[:, data.spec.channel_index("has_backbone")] = 0  # the mask has no head
+    net = NetConfig(latent_dim=4, conv_filters=(4, 4), ffnn_width=8, ffnn_depth=1)
+    config = TrainingConfig(net=net, max_epochs=2, finetune_epochs=0, progress=False,
+                            head_degree=3)  # fmt: skip
+    with pytest.warns(UserWarning, match=r"degree-3 head carries a lower degree at 41 of 41"):
+        surrogate = train_on_dataset(data, config)
+    np.testing.assert_array_equal(surrogate.head_carried_degree, by_rule)
+    runtime = SurrogateRuntime.load(export_surrogate(surrogate, tmp_path / "surrogate"))
+    head = runtime.metadata["scalers"]["head"]
+    assert head["degree"] == 3 and head["carried_degree"] == by_rule.tolist()
+
+
 @pytest.mark.slow  # 160 s (the likelihood graph through the ONNX Op); the demo test covers the mask
 def test_the_likelihood_sees_the_mask_as_a_probability_not_nan(trained, tmp_path):
     import pymc as pm
