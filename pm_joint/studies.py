@@ -628,13 +628,15 @@ def swap_study(
     * ``wrong_first=False`` (the false-swap rate): ``B`` itself is added, so the model
       judged has the truth's structure; any change the swap keeps (a replacement or a
       removal of ``B``) is a false swap.
-    * ``wrong_first=True`` (the power): round 1's best refitted significant candidate other
-      than ``B`` is added instead; the swap corrects it when it puts ``B`` in its place.
+    * ``wrong_first=True`` (the power): round 1's best proposed candidate other than ``B``
+      (what the loop could have added), else its best refitted significant one, is added
+      instead; the swap corrects it when it puts ``B`` in its place.
       Campaigns where round 1 has no such candidate have no decision (``added`` None).
 
     The swap judges the effect added as it judges one an earlier round added (``last``
     names no effect here): the decision is the same, made one round earlier. Each row also
-    says whether round 1 proposed ``B`` first, and the false vetoes of the truth: the
+    says whether round 1 proposed ``B`` first, round 1's ambiguity groups, and the false
+    vetoes of the truth: the
     channels :data:`~identification.criticism.criticism.WORSE` flags when ``B`` is
     refitted in round 1 (``add_worse``, None when ``B`` was not refitted), and, with
     ``wrong_first``, in the swap's trial of ``B`` (``swap_veto``).
@@ -651,7 +653,9 @@ def swap_study(
         refitted = {c.effect: c for c in first.candidates if c.fit is not None}
         added = effect
         if wrong_first:
-            rivals = first.alternatives(effect)
+            # what the loop could have added (proposed), else any significant runner-up
+            rivals = [c.effect for c in proposed if c.effect != effect]
+            rivals = rivals or first.alternatives(effect)
             added = rivals[0] if rivals else None
         row: dict[str, Any] = {
             "campaign": k,
@@ -660,8 +664,10 @@ def swap_study(
             "levels": levels,
             "conditions": present,
             "proposed_first": proposed[0].effect if proposed else None,
+            "groups": [list(g.effects) for g in first.groups],
             "add_worse": list(refitted[effect].worse) if effect in refitted else None,
             "added": added,
+            "added_was_proposed": added in [c.effect for c in proposed],
         }
         if added is not None:
             alternatives = first.alternatives(added)
