@@ -206,6 +206,12 @@ def main() -> None:
         sum(any({r["truth"], r["added"]} <= set(g) for g in r["groups"]) for r in grouped),
         len(grouped),
     )  # fmt: skip
+    mistakes = [r for r in grouped if r.get("added_was_proposed")]
+    figures["uncorrected_mistakes_grouped_with_truth"] = _rate(
+        "  of the loop's mistakes not corrected, flagged as one group with the truth",
+        sum(any({r["truth"], r["added"]} <= set(g) for g in r["groups"]) for r in mistakes),
+        len(mistakes),
+    )  # fmt: skip
     power_by_pair = Counter((r["truth"], r["added"], r["decision"]) for r in wrong_decided)
     for (truth, added, decision), n in sorted(power_by_pair.items()):
         print(f"    truth {truth}, added {added}: {decision} × {n}")
