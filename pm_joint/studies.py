@@ -8,6 +8,9 @@ nothing in the library imports this module).
   calibrated decision over many fast null campaigns: harmonic-balance backbones of
   assemblies drawn around a truth, with amplitude jitter and heteroscedastic noise,
   criticised with the truth's own structure (anything found is a false discovery).
+* :func:`swap_study` — the swap step of the stepwise loop over the same fast campaigns:
+  how often it undoes a right addition (truth = base + an effect with a near-collinear
+  rival), how often it corrects a wrong one.
 * :func:`clopper_pearson` — the two-sided exact binomial interval of a rate.
 * :func:`table5_study` — the paper's Table 5: surrogate accuracy against training size.
 * :func:`synthetic_campaign` and :func:`population_coverage` — the calibration of the
@@ -636,10 +639,9 @@ def swap_study(
     The swap judges the effect added as it judges one an earlier round added (``last``
     names no effect here): the decision is the same, made one round earlier. Each row also
     says whether round 1 proposed ``B`` first, round 1's ambiguity groups, and the false
-    vetoes of the truth: the
-    channels :data:`~identification.criticism.criticism.WORSE` flags when ``B`` is
-    refitted in round 1 (``add_worse``, None when ``B`` was not refitted), and, with
-    ``wrong_first``, in the swap's trial of ``B`` (``swap_veto``).
+    vetoes of the truth: the channels :data:`~identification.criticism.criticism.WORSE`
+    flags when ``B`` is refitted in round 1 (``add_worse``, None when ``B`` was not
+    refitted), and, with ``wrong_first``, in the swap's trial of ``B`` (``swap_veto``).
     """
     rows = []
     for k in range(campaigns):
