@@ -8,6 +8,9 @@ nothing in the library imports this module).
   calibrated decision over many fast null campaigns: harmonic-balance backbones of
   assemblies drawn around a truth, with amplitude jitter and heteroscedastic noise,
   criticised with the truth's own structure (anything found is a false discovery).
+* :func:`swap_study` — the swap step of the stepwise loop over the same fast campaigns:
+  how often it undoes a right addition (truth = base + an effect with a near-collinear
+  rival), how often it corrects a wrong one.
 * :func:`clopper_pearson` — the two-sided exact binomial interval of a rate.
 * :func:`table5_study` — the paper's Table 5: surrogate accuracy against training size.
 * :func:`synthetic_campaign` and :func:`population_coverage` — the calibration of the
@@ -46,6 +49,7 @@ __all__ = [
     "NULL_CONDITIONS",
     "NULL_TRUTHS",
     "START_LIBRARY",
+    "SWAP_TRUTHS",
     "Coverage",
     "StudyResult",
     "binomial_bounds",
@@ -57,6 +61,7 @@ __all__ = [
     "rows_table",
     "scenario_kind",
     "simulated_campaign",
+    "swap_study",
     "synthetic_campaign",
     "table5_study",
 ]
@@ -521,6 +526,22 @@ def simulated_campaign(
     return BackboneSet(curves)
 
 
+def _lab_campaign(
+    truth: JointModel, n_curves: int, seed: int, k: int
+) -> tuple[list[str], int, BackboneSet]:
+    """Campaign ``k`` of a study seeded ``seed``: its lab conditions (each of
+    :data:`NULL_CONDITIONS` present with probability ½), its levels per branch (5, 6 or 8),
+    drawn from its own seed, and the simulated campaign."""
+    draw = np.random.default_rng([seed, k, 7])
+    present = [name for name in NULL_CONDITIONS if draw.uniform() < 0.5]
+    levels = int(draw.choice([5, 6, 8]))
+    conditions = {o: v for name in present for o, v in NULL_CONDITIONS[name].items()}
+    measured = simulated_campaign(
+        truth, n_curves, seed=seed * 100_003 + k, levels=levels, **conditions
+    )
+    return present, levels, measured
+
+
 def null_study(
     campaigns: int,
     *,
@@ -545,13 +566,7 @@ def null_study(
         n_curves = curve_counts[(k // len(truths)) % len(curve_counts)]
         truth = RIG_PRESETS[NULL_TRUTHS[truth_name]].model
         began = time.perf_counter()
-        draw = np.random.default_rng([seed, k, 7])
-        present = [name for name in NULL_CONDITIONS if draw.uniform() < 0.5]
-        levels = int(draw.choice([5, 6, 8]))
-        conditions = {o: v for name in present for o, v in NULL_CONDITIONS[name].items()}
-        measured = simulated_campaign(
-            truth, n_curves, seed=seed * 100_003 + k, levels=levels, **conditions
-        )
+        present, levels, measured = _lab_campaign(truth, n_curves, seed, k)
         crit = criticize(truth, measured, **options)
         row = {
             "campaign": k,
@@ -574,6 +589,123 @@ def null_study(
         if progress is not None:
             progress(row)
     return rows
+
+
+#: Truths of the swap study: each catalogue effect of the lab scenarios that has a rival
+#: the data may hardly tell from it (cubic hardening: tanh/exponential/microslip; the
+#: damping laws among themselves; Coulomb and Stribeck friction), on the lab base model.
+SWAP_TRUTHS: tuple[str, ...] = (
+    "cubic_stiffness",
+    "tanh_saturation",
+    "exponential",
+    "microslip",
+    "quadratic_damping",
+    "cubic_damping",
+    "van_der_pol",
+    "coulomb_friction",
+    "stribeck_friction",
+)
+
+
+def swap_study(
+    campaigns: int,
+    *,
+    wrong_first: bool = False,
+    truths: Sequence[str] = SWAP_TRUTHS,
+    curve_counts: Sequence[int] = (1, 3, 5, 10),
+    seed: int = 0,
+    progress: Callable[[dict], None] | None = None,
+    **options: Any,
+) -> list[dict[str, Any]]:
+    """The swap step's decisions (:meth:`~identification.criticism.criticism.Criticism.swap`)
+    over ``campaigns`` fast campaigns (truths and curve counts in turn, lab conditions as
+    :func:`null_study` draws them). ``options`` go to
+    :func:`identification.criticism.criticism.criticize`.
+
+    Each campaign's truth is the lab base model plus one effect ``B`` (the preset
+    ``lab-hidden-<B>``). Round 1 criticises the truth without ``B``; its significant
+    refitted runners-up are the alternatives the swap may put in place of the effect
+    added (:meth:`~identification.criticism.criticism.Criticism.alternatives`, as
+    :func:`~identification.criticism.criticism.run_rounds` passes them).
+
+    * ``wrong_first=False`` (the false-swap rate): ``B`` itself is added, so the model
+      judged has the truth's structure; any change the swap keeps (a replacement or a
+      removal of ``B``) is a false swap.
+    * ``wrong_first=True`` (the power): round 1's best proposed candidate other than ``B``
+      (what the loop could have added), else its best refitted significant one, is added
+      instead; the swap corrects it when it puts ``B`` in its place.
+      Campaigns where round 1 has no such candidate have no decision (``added`` None).
+
+    The swap judges the effect added as it judges one an earlier round added (``last``
+    names no effect here): the decision is the same, made one round earlier. Each row also
+    says whether round 1 proposed ``B`` first, round 1's ambiguity groups, and the false
+    vetoes of the truth: the channels :data:`~identification.criticism.criticism.WORSE`
+    flags when ``B`` is refitted in round 1 (``add_worse``, None when ``B`` was not
+    refitted), and, with ``wrong_first``, in the swap's trial of ``B`` (``swap_veto``).
+    """
+    rows = []
+    for k in range(campaigns):
+        effect = truths[k % len(truths)]
+        n_curves = curve_counts[(k // len(truths)) % len(curve_counts)]
+        truth = RIG_PRESETS["lab-hidden-" + effect.replace("_", "-")].model
+        began = time.perf_counter()
+        present, levels, measured = _lab_campaign(truth, n_curves, seed, k)
+        first = criticize(truth.without(effect), measured, **options)
+        proposed = first.missing()
+        refitted = {c.effect: c for c in first.candidates if c.fit is not None}
+        added = effect
+        if wrong_first:
+            # what the loop could have added (proposed), else any significant runner-up
+            rivals = [c.effect for c in proposed if c.effect != effect]
+            rivals = rivals or first.alternatives(effect)
+            added = rivals[0] if rivals else None
+        row: dict[str, Any] = {
+            "campaign": k,
+            "truth": effect,
+            "n_curves": n_curves,
+            "levels": levels,
+            "conditions": present,
+            "proposed_first": proposed[0].effect if proposed else None,
+            "groups": [list(g.effects) for g in first.groups],
+            "add_worse": list(refitted[effect].worse) if effect in refitted else None,
+            "added": added,
+            "added_was_proposed": added in [c.effect for c in proposed],
+        }
+        if added is not None:
+            alternatives = first.alternatives(added)
+            swapped = first.add(added).swap({added: alternatives}, last="")
+            trials = [
+                {key: t[key] for key in ("add", "delta_chi2", "kept", "why")} for t in swapped.swaps
+            ]
+            kept = [t for t in swapped.swaps if t["kept"]]
+            change = kept[0] if kept else None
+            truth_trial = [t for t in swapped.swaps if t["add"] == effect]
+            row |= {
+                "alternatives": alternatives,
+                "trials": trials,
+                "best_replacement_gain": max(
+                    (t["delta_chi2"] for t in swapped.swaps if t["add"] is not None),
+                    default=None,
+                ),
+                "decision": _swap_decision(change),
+                "false_swap": None if wrong_first else change is not None,
+                "corrected": (change is not None and change["add"] == effect)
+                if wrong_first
+                else None,
+                "swap_veto": ("worse" in truth_trial[0]["why"]) if truth_trial else None,
+            }
+        row["seconds"] = time.perf_counter() - began
+        rows.append(row)
+        if progress is not None:
+            progress(row)
+    return rows
+
+
+def _swap_decision(change: Mapping[str, Any] | None) -> str:
+    """A swap step's outcome in words: "kept", "replaced by <effect>" or "removed"."""
+    if change is None:
+        return "kept"
+    return f"replaced by {change['add']}" if change["add"] else "removed"
 
 
 def clopper_pearson(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
