@@ -55,7 +55,7 @@ def main() -> None:
     start = time.perf_counter()
     # Every measured point, truncation correction, centred="auto": as `pm-joint update
     # --population hierarchical` runs it (population_coverage's defaults), with its 1 000
-    # draws and tuning steps (2 × 500 left r̂ above 1.01 in 18 of 20 campaigns, 6 at 1 000).
+    # draws and tuning steps (2 × 500 left r̂ above 1.01 in 18 of 20 campaigns, 5 at 1 000).
     coverage = population_coverage(
         RIG_PRESETS["trc-like"].model, NAMES, excitation, n_campaigns=n_campaigns,
         n_curves=25, location_scale=0.05, population_scale=0.1, draws=1000, tune=1000,

@@ -303,7 +303,7 @@ def hierarchical_model(
     parameter. Each measured value, less the truncation error of the
     single-harmonic balance (``truncation``), is Normal around the curve's
     single-harmonic backbone at the same amplitude. The measurement error of a
-    channel is ``σ_c (a / a_ref)^γ_c``, times the predicted value for the
+    channel is ``σ_c (a / a_ref)^γ_c``, times the measured value for the
     channels of ``relative_noise``: ``{channel}_noise`` (σ_c, half-normal with
     the spread of the measured values, of their logarithms where relative, as
     its scale) at the geometric-mean amplitude ``a_ref`` and, with
@@ -333,7 +333,7 @@ def hierarchical_model(
         False: one error per channel.
     relative_noise
         Channels whose measurement error is relative (proportional to the
-        predicted value): the damping ratio's by default, as damping estimates
+        measured value): the damping ratio's by default, as damping estimates
         err in proportion to the damping (on the ``trc-like`` rig the damping
         ratio changes fivefold over the amplitudes, which an absolute power law
         in the amplitude cannot follow).
@@ -418,7 +418,12 @@ def hierarchical_model(
                 slope = pm.Normal(f"{channel}_noise_slope", 0.0, 1.0)
                 noise = noise * pt.exp(slope * log_relative_amplitude)
             if relative:
-                noise = noise * pt.abs(predicted)
+                # Scaled by the measured value, not the predicted one: a noise that follows
+                # the prediction lets the sampler trade fit for noise (demo campaign, all
+                # non-centred, nutpie 2 × 2 000: r̂ 1.83 and 505 divergences scaled by the
+                # prediction, r̂ 1.017 and 1 divergence by the measurement); at 2 % noise
+                # the two scales differ by about 2 %.
+                noise = noise * np.abs(values[channel] - gaps[channel])
             pm.Normal(channel, predicted, noise, observed=observed, dims="point")
     pm_model.population_model = HIERARCHICAL  # sample() keeps it with the draws
     pm_model.template = model
