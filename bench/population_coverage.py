@@ -6,10 +6,12 @@ each campaign draws its population from the model's own prior (log-means
 the ``trc-like`` rig varies most (linear and cubic stiffness, viscous damping,
 microslip slip force), 25 assemblies from that population, measured by the
 time-domain PLL simulator at the rig's 12 excitation levels with
-amplitude-dependent noise; the hierarchical model (single-harmonic balance,
-frequency and damping, non-centred as the CLI runs it) is sampled with PyMC's
-NUTS and its central 90 % intervals of every log-mean and log-spread are
-checked against the truth.
+amplitude-dependent noise; the hierarchical model as
+``pm-joint update --population hierarchical`` runs it (every measured point,
+single-harmonic balance less its truncation error at a per-curve estimate,
+frequency and relative damping noise, centred where the curves pin a
+parameter) is sampled with PyMC's NUTS and its central 90 % intervals of every
+log-mean and log-spread are checked against the truth.
 Campaigns are independent, so each parameter's count is Binomial(n, 0.9): the
 JSON gives the two-sided 95 % acceptance region and whether every count lies
 in it. Counts pooled over parameters share data and get no bound.
@@ -35,13 +37,12 @@ from pm_joint.studies import population_coverage
 NAMES = ["linear_stiffness", "cubic_stiffness", "viscous_damping", "microslip.F_s"]
 
 
-def amplitude_levels(rig: Rig, excitation_levels: np.ndarray, n_levels: int = 8) -> np.ndarray:
-    """Levels every assembly of the prior's populations reaches: the nominal model's PLL
-    amplitudes, shrunk a factor 1.5 inside at both ends."""
+def nominal_amplitudes(rig: Rig, excitation_levels: np.ndarray) -> np.ndarray:
+    """The nominal model's PLL amplitudes (m) at the excitation levels: where the points of
+    an assembly of the prior's median lie."""
     nominal = np.array([[rig.model.parameters[n] for n in NAMES]])
     result = pll_backbones(rig.model, excitation_levels, nominal, NAMES, progress=False)
-    amplitude = result.amplitude_m[0, result.locked[0]]
-    return np.geomspace(1.5 * amplitude.min(), amplitude.max() / 1.5, n_levels)
+    return result.amplitude_m[0, result.locked[0]]
 
 
 def main() -> None:
@@ -50,12 +51,15 @@ def main() -> None:
     n_campaigns = int(sys.argv[1]) if len(sys.argv) > 1 else 20
     rig = Rig.preset("trc-like", levels=12)
     excitation = rig.shaker_gain * np.asarray(rig.levels_v)
-    levels = amplitude_levels(rig, excitation)
+    levels = nominal_amplitudes(rig, excitation)
     start = time.perf_counter()
+    # Every measured point, truncation correction, centred="auto": as `pm-joint update
+    # --population hierarchical` runs it (population_coverage's defaults), with its 1 000
+    # draws and tuning steps (2 × 500 left r̂ above 1.01 in 18 of 20 campaigns, 5 at 1 000).
     coverage = population_coverage(
-        RIG_PRESETS["trc-like"].model, NAMES, excitation, levels, n_campaigns=n_campaigns,
-        n_curves=25, location_scale=0.05, population_scale=0.1, draws=500, tune=500,
-        progress=True, centred=False,  # as `pm-joint update --population hierarchical` runs it
+        RIG_PRESETS["trc-like"].model, NAMES, excitation, n_campaigns=n_campaigns,
+        n_curves=25, location_scale=0.05, population_scale=0.1, draws=1000, tune=1000,
+        progress=True,
     )  # fmt: skip
     seconds = time.perf_counter() - start
     print(coverage)

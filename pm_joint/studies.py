@@ -988,7 +988,7 @@ def population_coverage(
     model: JointModel,
     names: Sequence[str],
     excitation_levels: ArrayLike,
-    amplitudes_m: ArrayLike,
+    amplitudes_m: ArrayLike | None = None,
     *,
     n_campaigns: int = 20,
     n_curves: int = 25,
@@ -1004,7 +1004,8 @@ def population_coverage(
     frequency_noise_hz: float = 0.02,
     damping_noise: float = 0.02,
     seed: int = 0,
-    centred: bool = True,
+    centred: bool | str = "auto",
+    truncation: int | None = 5,
     progress: bool = True,
 ) -> Coverage:
     """Simulation-based calibration of :func:`hierarchical_model` on PLL-simulated campaigns.
@@ -1013,14 +1014,16 @@ def population_coverage(
     prior, ``μ ~ N(0, location_scale)`` and ``σ ~ HalfNormal(population_scale)``
     per parameter, then ``n_curves`` assemblies ``θ_i = θ0·exp(μ + σ z_i)``,
     measured by the PLL simulator at ``excitation_levels`` with noise
-    (:func:`pll_campaign`); every curve is interpolated at those of
-    ``amplitudes_m`` it reached, and the hierarchical model, with the same
-    priors, is sampled. A calibrated model holds the truth in its central
-    ``prob`` intervals of ``log_mean`` and ``log_spread`` in about ``prob`` of
-    the campaigns
-    (:meth:`Coverage.bounds` gives the two-sided binomial region). The data
+    (:func:`pll_campaign`); the hierarchical model, with the same priors, is
+    sampled on every measured point (``amplitudes_m`` None, as
+    ``pm-joint update --population hierarchical`` runs it) or on each curve
+    interpolated at those of ``amplitudes_m`` it reached. A calibrated model
+    holds the truth in its central ``prob`` intervals of ``log_mean`` and
+    ``log_spread`` in about ``prob`` of the campaigns (:meth:`Coverage.bounds`
+    gives the two-sided binomial region). The data
     come from the time-domain PLL, the inference from single-harmonic
-    balance: model error shows here as undercoverage. ``target_accept`` is
+    balance: model error shows here as undercoverage (``truncation``, the
+    hierarchical model's, subtracts the harmonic-balance gap). ``target_accept`` is
     closer to 1 than PyMC's 0.8: spreads drawn from the prior come near 0,
     where the posterior of the spread narrows and NUTS diverges at large steps.
     ``centred`` picks the hierarchical model's parametrisation (its ``centred``).
@@ -1043,6 +1046,7 @@ def population_coverage(
         pm_model = hierarchical_model(
             model, measured, names, amplitudes_m=amplitudes_m, channels=channels,
             location_scale=location_scale, population_scale=population_scale, centred=centred,
+            truncation=truncation,
         )  # fmt: skip
         idata = sample(
             pm_model, sampler=sampler, draws=draws, tune=tune, chains=chains,

@@ -180,10 +180,15 @@ def population_predictive(
 
     Each of ``n_draws`` posterior draws gives a new assembly
     ``θ = {p}_population · exp(log_spread · z)``, ``z ~ N(0, 1)``, its
-    single-harmonic backbone at ``amplitudes_m`` (the model the likelihood
-    uses) and the measurement noise of that draw (``{channel}_noise`` and its
-    amplitude slope, taken about the geometric mean of ``amplitudes_m``).
-    Returns a Dataset with one variable per channel, dims ``(sample, amplitude)``.
+    backbone at ``amplitudes_m`` and the measurement noise of that draw
+    (``{channel}_noise`` and its amplitude slope, taken about the geometric mean
+    of ``amplitudes_m``, times the backbone's value for a channel with relative
+    noise). The backbone is what the likelihood compared the measurements
+    with: the single-harmonic balance plus its truncation error, i.e. the
+    harmonic balance with the harmonics the model's truncation correction used
+    (attribute ``hierarchical_options``; posteriors without it: single-harmonic,
+    absolute noise). Returns a Dataset with one variable per channel, dims
+    ``(sample, amplitude)``.
     """
     posterior = group_dataset(idata, "posterior")
     rng = np.random.default_rng(seed)
@@ -198,7 +203,10 @@ def population_predictive(
     picks = np.linspace(0, len(population) - 1, min(n_draws, len(population))).astype(int)
     theta = population[picks] * np.exp(spread[picks] * rng.standard_normal(spread[picks].shape))
     amplitudes_m = np.asarray(amplitudes_m, dtype=float)
-    hb = backbone(model, amplitudes_m, parameters=theta, names=list(names), method="single")
+    options = json.loads(idata.attrs.get("hierarchical_options", "{}"))
+    harmonics = options.get("truncation")
+    method = {"method": "multi", "harmonics": harmonics} if harmonics else {"method": "single"}
+    hb = backbone(model, amplitudes_m, parameters=theta, names=list(names), **method)
     relative = np.log(amplitudes_m) - np.mean(np.log(amplitudes_m))
     data = {}
     for channel in channels:
@@ -206,6 +214,8 @@ def population_predictive(
         if f"{channel}_noise_slope" in posterior:
             noise = noise * np.exp(flat(f"{channel}_noise_slope")[picks][:, None] * relative)
         clean = getattr(hb, channel)
+        if channel in options.get("relative_noise", ()):
+            noise = noise * np.abs(clean)
         data[channel] = (("sample", "amplitude"), clean + noise * rng.standard_normal(clean.shape))
     return xr.Dataset(
         data,

@@ -137,7 +137,7 @@ def sample(
         )  # fmt: skip
     idata.attrs["sampler"] = sampler
     idata.attrs["free_variables"] = json.dumps([rv.name for rv in pm_model.free_RVs])
-    for key in ("population_model",):
+    for key in ("population_model", "hierarchical_options"):
         if hasattr(pm_model, key):
             idata.attrs[key] = getattr(pm_model, key)
     density = getattr(pm_model, "backbone_density", None)
