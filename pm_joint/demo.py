@@ -46,11 +46,11 @@ class DemoSize:
 #: (:data:`~pm_joint.inference.SAMPLER_DEFAULTS`, whose reason the report prints; the
 #: paper's Metropolis, its proposal covariance learned while tuning, proposing in the prior
 #: box's coordinates), two chains of 30 000 on the two cores (``draws=None``: the
-#: sampler's default); the hierarchical model with nutpie, two chains of 2 000.
+#: sampler's default); the hierarchical model with nutpie, two chains of 4 000.
 SIZES = {
     "full": DemoSize(
         assemblies=25, n_levels=10, sindy_records=3, surrogate_curves=500, surrogate_epochs=None,
-        draws=30_000, tune=5_000, chains=2, hierarchical_draws=2_000, criticism_rounds=2,
+        draws=30_000, tune=5_000, chains=2, hierarchical_draws=4_000, criticism_rounds=2,
     ),
     "small": DemoSize(
         assemblies=4, n_levels=10, sindy_records=3, surrogate_curves=60, surrogate_epochs=15,

@@ -39,7 +39,7 @@ from identification.model import JointModel
 from identification.rig import RIG_PRESETS, rig_for_preset
 from identification.rig.presets import LAB_OUT_OF_CATALOGUE_SCENARIOS
 from pm_joint.analysis import convergence_verdict
-from pm_joint.inference import hierarchical_model, sample
+from pm_joint.inference import HIERARCHICAL_TARGET_ACCEPT, hierarchical_model, sample
 from surrogates.dataset import BackboneDataset
 from surrogates.evaluate import PAPER_TABLE5
 from surrogates.train import TrainingConfig, train_on_dataset
@@ -997,7 +997,7 @@ def population_coverage(
     channels: Sequence[str] = ("frequency_hz", "damping_ratio"),
     prob: float = 0.9,
     sampler: str = "nuts",
-    target_accept: float = 0.95,
+    target_accept: float = HIERARCHICAL_TARGET_ACCEPT,
     draws: int = 500,
     tune: int = 500,
     chains: int = 2,

@@ -16,6 +16,7 @@ from pm_joint.inference.models import (
 )
 from pm_joint.inference.sampling import (
     GRADIENT_SAMPLERS,
+    HIERARCHICAL_TARGET_ACCEPT,
     POPULATION_MODELS,
     SAMPLER_DEFAULTS,
     SAMPLERS,
@@ -33,6 +34,7 @@ from pm_joint.inference.storage import (
 __all__ = [
     "GRADIENT_SAMPLERS",
     "HIERARCHICAL",
+    "HIERARCHICAL_TARGET_ACCEPT",
     "POPULATION_MATCHING",
     "POPULATION_MODELS",
     "SAMPLERS",
