@@ -36,13 +36,8 @@ from surrogate import CHANNELS, demo_front, scatter_interval
 from identification.model import parameter_bounds
 from surrogates.baselines import ROWS_PER_COEFFICIENT, PolynomialBaseline
 from surrogates.dataset import generate_dataset
+from surrogates.evaluate import channel_errors
 from surrogates.grid import assembly_scatter, measured_grid, measured_on_grid
-
-
-def per_level_rmse(predicted: np.ndarray, truth: np.ndarray, used: np.ndarray) -> np.ndarray:
-    """RMSE per grid amplitude over the entries ``used`` (``(n, n_levels)`` each)."""
-    error = np.where(used, predicted - truth, 0.0)
-    return np.sqrt((error**2).sum(axis=0) / used.sum(axis=0))
 
 
 def rows_and_degrees(model, names, grid, scatter, n_curves: int) -> dict:
@@ -57,6 +52,8 @@ def rows_and_degrees(model, names, grid, scatter, n_curves: int) -> dict:
     fits = {d: PolynomialBaseline.fit(data.spec, data.X[train], data.Y[train], weights[train], d)
             for d in (1, 3)}  # fmt: skip
     truth, used = data.Y[test], weights[test] > 0
+    predicted = {d: fit.predict(data.X[test]) for d, fit in fits.items()}
+    errors = {d: channel_errors(p, truth, weights[test], data.spec) for d, p in predicted.items()}
     out = {
         "n_curves": n_curves,
         "train_rows_per_level": (weights[train][..., 0] > 0).sum(axis=0).tolist(),
@@ -65,16 +62,14 @@ def rows_and_degrees(model, names, grid, scatter, n_curves: int) -> dict:
     }
     for index, channel in enumerate(CHANNELS):
         for degree, name in ((1, "linear"), (3, "cubic")):
-            rmse = per_level_rmse(
-                fits[degree].predict(data.X[test])[..., index], truth[..., index], used[..., index]
-            )
+            rmse = np.array(errors[degree][channel]["rmse_per_level"], dtype=float)
             out[f"{channel}_rmse_per_level_{name}"] = rmse.tolist()
             out[f"{channel}_{name}_to_scatter_per_level"] = (rmse / scatter[:, index]).tolist()
     # Item 2: at the top amplitude, the cubic's frequency error by closeness to the fold.
     top = -1
     level = truth[..., CHANNELS.index("base_acceleration_m_s2")]
     held = used[:, top, 0]
-    error = fits[3].predict(data.X[test])[:, top, 0] - truth[:, top, 0]
+    error = predicted[3][:, top, 0] - truth[:, top, 0]
     rise = np.log(level[held, top] / level[held, top - 1])
     edges = np.quantile(rise, [0, 1 / 3, 2 / 3, 1])
     out["top"] = {

@@ -1,24 +1,16 @@
 """Which parameters the hierarchical model lets vary (pm_joint.inference.varying)."""
 
 import numpy as np
+from oscillators import duffing
 
 from identification.analytical.harmonic import backbone
 from identification.measurements.backbone import Backbone, BackboneSet
-from identification.model import JointModel
 from pm_joint.inference.varying import varying_parameters
 
-W0 = 2 * np.pi * 100.0
 #: A Duffing panel with an even spring: over a symmetric orbit x² averages out of the
 #: fundamental, so its describing function is zero and a single-harmonic backbone
 #: cannot see it at all.
-TEMPLATE = JointModel(
-    {
-        "linear_stiffness": W0**2,
-        "viscous_damping": 2 * 0.004 * W0,
-        "cubic_stiffness": 1e10,
-        "quadratic_stiffness": 3e7,
-    }
-)
+TEMPLATE = duffing(quadratic_stiffness=3e7)
 NAMES = ["linear_stiffness", "viscous_damping", "cubic_stiffness", "quadratic_stiffness"]
 
 
@@ -52,7 +44,12 @@ def test_a_parameter_the_other_one_imitates_is_held():
     weak = TEMPLATE.replace(cubic_stiffness=1e4)
     rng = np.random.default_rng(1)
     amplitudes = 1e-3 * np.geomspace(0.1, 1.5, 12)
-    values = np.column_stack([W0**2 * np.exp(0.005 * rng.standard_normal(6)), np.full(6, 1e4)])
+    values = np.column_stack(
+        [
+            TEMPLATE.parameters["linear_stiffness"] * np.exp(0.005 * rng.standard_normal(6)),
+            np.full(6, 1e4),
+        ]
+    )
     hb = backbone(
         weak, amplitudes, parameters=values, names=["linear_stiffness", "cubic_stiffness"]
     )
