@@ -43,7 +43,6 @@ from pm_joint import html, plotting
 from pm_joint.analysis import convergence_verdict, identifiability, loo, population_predictive
 from pm_joint.inference import (
     GRADIENT_SAMPLERS,
-    HIERARCHICAL_TARGET_ACCEPT,
     POPULATION_MODELS,
     SAMPLER_DEFAULTS,
     amplitudes_within_surrogate,
@@ -484,16 +483,12 @@ def update_backbones(
             workspace.model, measured, forward=forward, surrogate=surrogate, names=names,
             density=density, native_graph=sampler in GRADIENT_SAMPLERS,
         )  # fmt: skip
-    funnel = population == "hierarchical" and sampler in GRADIENT_SAMPLERS
-    step_options = {"target_accept": HIERARCHICAL_TARGET_ACCEPT} if funnel else None
     if earlier_run:  # and resume
-        idata = continue_sampling(
-            pm_model, trace, draws=draws, sampler=sampler, step_options=step_options
-        )
+        idata = continue_sampling(pm_model, trace, draws=draws, sampler=sampler)
     else:
         idata = sample(
             pm_model, sampler=sampler, draws=draws, tune=tune, chains=chains, random_seed=seed,
-            trace=trace, step_options=step_options,
+            trace=trace,
         )  # fmt: skip
     verdict = convergence_verdict(idata)
     idata.attrs["convergence"] = json.dumps(verdict.to_dict())

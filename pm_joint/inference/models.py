@@ -407,8 +407,8 @@ def hierarchical_model(
             # Data: the values scored and the gap subtracted from them travel with the
             # posterior (its constant data).
             pm.Data(f"{channel}_truncation", gaps[channel], dims="point")
-            observed = pm.Data(f"{channel}_measured", values[channel] - gaps[channel],
-                               dims="point")  # fmt: skip
+            scored = values[channel] - gaps[channel]
+            observed = pm.Data(f"{channel}_measured", scored, dims="point")
             predicted = backbone[:, BACKBONE_COLUMNS.index(channel)]
             relative = channel in relative_noise
             logs = np.log(np.abs(values[channel]))  # a measured 0 has no log: left out
@@ -423,7 +423,7 @@ def hierarchical_model(
                 # non-centred, nutpie 2 × 2 000: r̂ 1.83 and 505 divergences scaled by the
                 # prediction, r̂ 1.017 and 1 divergence by the measurement); at 2 % noise
                 # the two scales differ by about 2 %.
-                noise = noise * np.abs(values[channel] - gaps[channel])
+                noise = noise * np.abs(scored)
             pm.Normal(channel, predicted, noise, observed=observed, dims="point")
     pm_model.population_model = HIERARCHICAL  # sample() keeps it with the draws
     pm_model.template = model

@@ -20,6 +20,7 @@ import pymc as pm
 import xarray as xr
 from pymc.blocking import DictToArrayBijection
 
+from pm_joint.inference.models import HIERARCHICAL
 from pm_joint.inference.steps import CovarianceMetropolis, KeptLogp
 from pm_joint.inference.storage import attach_density, load_posterior
 from pm_joint.inference.traces import DrawWriter, start_trace
@@ -110,7 +111,8 @@ def sample(
         Steps per chain written at a time to ``trace`` (at most that many are
         lost when a run is killed).
     step_options
-        Keywords of the step method (e.g. ``target_accept`` for NUTS and nutpie;
+        Keywords of the step method (e.g. ``target_accept`` for NUTS and nutpie,
+        :data:`HIERARCHICAL_TARGET_ACCEPT` unless given on a hierarchical model;
         ``tune_interval`` for Metropolis).
     initvals
         Starting points (one mapping, or one per chain), as ``pm.sample`` takes
@@ -128,6 +130,8 @@ def sample(
     if sampler not in SAMPLERS:
         raise ValueError(f"sampler must be one of {SAMPLERS}, got {sampler!r}")
     options = dict(step_options or {})
+    if sampler in GRADIENT_SAMPLERS and getattr(pm_model, "population_model", None) == HIERARCHICAL:
+        options.setdefault("target_accept", HIERARCHICAL_TARGET_ACCEPT)
     if sampler == "nutpie":
         if trace is not None:
             raise ValueError(
