@@ -191,9 +191,14 @@ def criticism_studies(results: dict[str, dict]) -> str:
         )
         sizes = hidden.get("group_sizes")
         if sizes:
+            shown = {
+                key: ", ".join(f"{n} of {size}" for size, n in counts.items()) or "none"
+                for key, counts in sizes.items()
+            }
             lines.append(
-                f"- … group sizes (members: groups): ranked candidates' {sizes['groups']}, "
-                f"model-term groups {sizes['term_groups']}"
+                f"- … groups of the first criticisms by members: ranked candidates' "
+                f"{shown['groups']}; model-term groups (the term and its stand-ins) "
+                f"{shown['term_groups']}"
             )
     terms = results.get("criticism_terms")
     if terms:
