@@ -169,6 +169,50 @@ def table5(results: dict[str, dict]) -> str:
     return setup + "\n".join(lines)
 
 
+def _counted(entry: dict) -> str:
+    """``k of n (95 % CP low–high %)`` of a rate the criticism benches print."""
+    return (
+        f"{entry['count']} of {entry['runs']} (95 % Clopper–Pearson "
+        f"{100 * entry['ci95_low']:.1f}–{100 * entry['ci95_high']:.1f} %)"
+    )
+
+
+def criticism_studies(results: dict[str, dict]) -> str:
+    """The hidden-effect study's outcomes and the model-term groups' false-flag rate."""
+    lines = []
+    hidden = results.get("criticism_hidden")
+    if hidden and "hidden_outcomes" in hidden:
+        outcomes = ", ".join(f"{n} {o}" for o, n in hidden["hidden_outcomes"].items())
+        lines.append(
+            f"- Hidden catalogue effects ({hidden['seeds']} seeds, starts "
+            f"{', '.join(hidden['starts'])}): {outcomes}; found (first, in a flagged group or "
+            f"in a model-term group of the start) with the key error down ≥ 80 %: "
+            f"{_counted(hidden['hidden_hits'])} of the rows judged"
+        )
+        sizes = hidden.get("group_sizes")
+        if sizes:
+            shown = {
+                key: ", ".join(f"{n} of {size}" for size, n in counts.items()) or "none"
+                for key, counts in sizes.items()
+            }
+            lines.append(
+                f"- … groups of the first criticisms by members: ranked candidates' "
+                f"{shown['groups']}; model-term groups (the term and its stand-ins) "
+                f"{shown['term_groups']}"
+            )
+    terms = results.get("criticism_terms")
+    if terms:
+        flags = terms["false_flags"]
+        lines.append(
+            f"- Model-term groups flagged although the data tell the term from the stand-in "
+            f"(λ ≥ {terms['separation']}): {_counted(flags)} over {terms['campaigns']} "
+            f"campaigns (the Δχ² rule alone predicts "
+            f"{100 * flags['predicted_by_delta_chi2_rule']:.1f} %); null verdicts with "
+            f"something proposed: {_counted(terms['null_verdicts'])}"
+        )
+    return "\n".join(lines) or "_Criticism studies not run._"
+
+
 def run_line(run: dict) -> str:
     """How a result file was made: date, seconds (when run_all timed it), machine, command."""
     parts = [run["date"]]
@@ -195,6 +239,7 @@ def write_tables(results: dict[str, dict]) -> None:
         "labels), independent test split; the paper's "
         "amplitude figures come from inverting its base-acceleration channel onto excitation "
         f"levels.\n\n{table5(results)}\n\n"
+        f"## Criticism studies\n\n{criticism_studies(results)}\n\n"
         f"## Runs\n\n{runs}\n"
     )
     (ROOT / "BENCHMARKS.md").write_text(text)

@@ -11,6 +11,8 @@ nothing in the library imports this module).
 * :func:`swap_study` — the swap step of the stepwise loop over the same fast campaigns:
   how often it undoes a right addition (truth = base + an effect with a near-collinear
   rival), how often it corrects a wrong one.
+* :func:`term_group_study` — model-term groups over the same fast campaigns: how often a
+  term of the truth's structure is grouped with a stand-in the data can tell it from.
 * :func:`clopper_pearson` — the two-sided exact binomial interval of a rate.
 * :func:`table5_study` — the paper's Table 5: surrogate accuracy against training size.
 * :func:`synthetic_campaign` and :func:`population_coverage` — the calibration of the
@@ -19,9 +21,11 @@ nothing in the library imports this module).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -31,7 +35,9 @@ from scipy import stats
 from identification.analytical.harmonic import backbone as harmonic_backbone
 from identification.analytical.pll import pll_backbones
 from identification.criticism.criticism import Criticism, criticize, run_rounds
-from identification.fitting.least_squares import fit_backbones
+from identification.fitting.data import FitData
+from identification.fitting.least_squares import FitResult, fit_backbones
+from identification.fitting.prediction import predict_channels
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.extraction import extract_backbones
 from identification.measurements.records import Record
@@ -50,6 +56,7 @@ __all__ = [
     "NULL_TRUTHS",
     "START_LIBRARY",
     "SWAP_TRUTHS",
+    "TERM_TRUTHS",
     "Coverage",
     "StudyResult",
     "binomial_bounds",
@@ -64,6 +71,7 @@ __all__ = [
     "swap_study",
     "synthetic_campaign",
     "table5_study",
+    "term_group_study",
 ]
 
 
@@ -150,15 +158,9 @@ class StudyResult:
 
     @property
     def added(self) -> list[str]:
-        """The effects the loop added, in order (a swap's replacement after its round's)."""
-        out = []
-        for step in self.history:
-            for part in step.action.split("; "):
-                if part.startswith("+ "):
-                    out.append(part[2:])
-                elif part.startswith("swap "):
-                    out += part[len("swap ") :].split(" + ")[1:]
-        return out
+        """The effects the loop added, in order (a swap's replacement after its round's),
+        as each step records them (:attr:`~identification.criticism.criticism.Step.added`)."""
+        return [effect for step in self.history for effect in step.added]
 
     @property
     def kept(self) -> list[str]:
@@ -264,13 +266,65 @@ class StudyResult:
         return float(np.nanmax(z[:, data.used]))
 
     @property
+    def term_group(self) -> dict[str, str] | None:
+        """Start-adequate rows: per hidden effect the start lacks, the start's term that the
+        first criticism's model-term groups
+        (:attr:`~identification.criticism.criticism.Criticism.term_groups`) say it is
+        consistent with; None unless every one of them is in such a group."""
+        if not self.start_adequate:
+            return None
+        groups = self.criticisms[0].term_groups
+        found = {}
+        for effect in (e for e in self.hidden if e not in self.start):
+            group = next((g for g in groups if effect in g.alternatives), None)
+            if group is None:
+                return None
+            found[effect] = group.term
+        return found
+
+    @cached_property
+    def _linear_fit(self) -> FitResult:
+        """The bare linear model refitted to the first criticism's data."""
+        crit = self.criticisms[0]
+        return crit._refit_structure(_bare_linear(crit.base.model))
+
+    def _linear_rmse(self, channel: str) -> float | None:
+        return getattr(self._linear_fit, _STEP_RMSE[channel])
+
+    def term_reduction(self, channel: str) -> float | None:
+        """Rows with a :attr:`term_group` of one hidden effect: fractional RMSE reduction of
+        a channel from the bare linear model (refitted to these data) to the start with the
+        hidden effect in place of the term it is grouped with (as the group refitted it).
+        Nothing is added on such a row (the start holds a stand-in already), so the effect's
+        worth is measured against the model without any nonlinearity (None otherwise)."""
+        found = self.term_group
+        if found is None or len(found) != 1:
+            return None
+        ((effect, term),) = found.items()
+        groups = self.criticisms[0].term_groups
+        after = getattr(next(g for g in groups if g.term == term).fits[effect], _STEP_RMSE[channel])
+        before = self._linear_rmse(channel)
+        return None if before is None or after is None else float(1 - after / before)
+
+    def start_reduction(self, channel: str) -> float | None:
+        """Start-adequate rows: fractional RMSE reduction of a channel from the bare linear
+        model (refitted to these data) to the refitted start (None on other rows)."""
+        if not self.start_adequate:
+            return None
+        after = getattr(self.criticisms[0].base, _STEP_RMSE[channel])
+        before = self._linear_rmse(channel)
+        return None if before is None or after is None else float(1 - after / before)
+
+    @property
     def outcome(self) -> str | None:
-        """Hidden scenarios: ``"hit"`` (:attr:`passed`), ``"start adequate"``
-        (:attr:`start_adequate`) or ``"miss"``; None for other kinds."""
+        """Hidden scenarios: ``"hit"`` (:attr:`passed`, the start lacking the effect),
+        ``"hit (start term group)"`` (a start-adequate row whose start term is grouped with
+        the hidden effect, :attr:`term_group`, and :attr:`passed`), ``"start adequate"``
+        (:attr:`start_adequate`, otherwise) or ``"miss"``; None for other kinds."""
         if self.kind != "hidden":
             return None
         if self.start_adequate:
-            return "start adequate"
+            return "hit (start term group)" if self.passed else "start adequate"
         return "hit" if self.passed else "miss"
 
     @property
@@ -278,15 +332,21 @@ class StudyResult:
         """Null: nothing found. Hidden: :attr:`hit` (or already in the start) and the key
         channel's error down ≥ 80 %; when the start holds every hidden effect already, the
         loop adds only effects of the truth (SINDy may miss another one, e.g. the viscous
-        term beside ẋ³) and ends with nothing significant; None (not judged) when the start
-        is adequate without it (:attr:`start_adequate`). Out of catalogue: "not explained
-        by the catalogue" or "partly explained" (proposals are admissible by construction)."""
+        term beside ẋ³) and ends with nothing significant. When the start is adequate
+        without it (:attr:`start_adequate`): the first criticism's model-term groups hold it
+        (:attr:`term_group`) and the key channel's error with it in place of the start's
+        term is down ≥ 80 % from the bare linear model's (:meth:`term_reduction`); None
+        (not judged) when no group holds it. Out of catalogue: "not explained by the
+        catalogue" or "partly explained" (proposals are admissible by construction)."""
         if self.kind == "null":
             return not self.false_discovery
         if self.kind == "out of catalogue":
             return self.verdict in ("not explained by the catalogue", "partly explained")
         if self.start_adequate:
-            return None
+            if self.term_group is None:
+                return None
+            key = self.term_reduction(KEY_CHANNEL[self.scenario])
+            return key is not None and key >= 0.8
         if self.in_start:
             return all(e in self.truth for e in self.added) and not (
                 self.criticisms[-1].significant
@@ -317,6 +377,17 @@ class StudyResult:
             "in_start": self.in_start,
             "start_adequate": self.start_adequate,
             "truth_gap_se": self.truth_gap,
+            "term_groups": [
+                {"term": g.term, "effects": list(g.alternatives), "separation": g.separation}
+                for g in first.term_groups
+            ],
+            "term_group": self.term_group,
+            "term_reduction": {c: self.term_reduction(c) for c in _STEP_RMSE}
+            if self.term_group
+            else None,
+            "start_reduction": {c: self.start_reduction(c) for c in _STEP_RMSE}
+            if self.start_adequate
+            else None,
             "beyond_scatter": list(first.beyond_scatter),
             "hit": self.hit,
             "frequency_rmse_hz": [c.base.frequency_rmse_hz for c in self.criticisms],
@@ -542,6 +613,29 @@ def _lab_campaign(
     return present, levels, measured
 
 
+def _campaigns(
+    campaigns: int,
+    truths: Sequence[str],
+    curve_counts: Sequence[int],
+    seed: int,
+    preset: Callable[[str], str],
+):
+    """The campaigns of a study, truths in turn and curve counts in turn per round of
+    truths: ``(k, truth's name, curve count, truth, when its simulation began, its lab
+    campaign)`` (:func:`_lab_campaign`; ``preset`` names the rig preset of a truth)."""
+    for k in range(campaigns):
+        name = truths[k % len(truths)]
+        n_curves = curve_counts[(k // len(truths)) % len(curve_counts)]
+        truth = RIG_PRESETS[preset(name)].model
+        began = time.perf_counter()
+        yield k, name, n_curves, truth, began, _lab_campaign(truth, n_curves, seed, k)
+
+
+def _hidden_preset(effect: str) -> str:
+    """The lab preset that hides ``effect`` in the lab base model."""
+    return "lab-hidden-" + effect.replace("_", "-")
+
+
 def null_study(
     campaigns: int,
     *,
@@ -561,12 +655,10 @@ def null_study(
     length mixes clean and artefact-laden campaigns over every truth and curve count.
     """
     rows = []
-    for k in range(campaigns):
-        truth_name = truths[k % len(truths)]
-        n_curves = curve_counts[(k // len(truths)) % len(curve_counts)]
-        truth = RIG_PRESETS[NULL_TRUTHS[truth_name]].model
-        began = time.perf_counter()
-        present, levels, measured = _lab_campaign(truth, n_curves, seed, k)
+    for k, truth_name, n_curves, truth, began, campaign in _campaigns(
+        campaigns, truths, curve_counts, seed, NULL_TRUTHS.__getitem__
+    ):
+        present, levels, measured = campaign
         crit = criticize(truth, measured, **options)
         row = {
             "campaign": k,
@@ -644,12 +736,10 @@ def swap_study(
     refitted), and, with ``wrong_first``, in the swap's trial of ``B`` (``swap_veto``).
     """
     rows = []
-    for k in range(campaigns):
-        effect = truths[k % len(truths)]
-        n_curves = curve_counts[(k // len(truths)) % len(curve_counts)]
-        truth = RIG_PRESETS["lab-hidden-" + effect.replace("_", "-")].model
-        began = time.perf_counter()
-        present, levels, measured = _lab_campaign(truth, n_curves, seed, k)
+    for k, effect, n_curves, truth, began, campaign in _campaigns(
+        campaigns, truths, curve_counts, seed, _hidden_preset
+    ):
+        present, levels, measured = campaign
         first = criticize(truth.without(effect), measured, **options)
         proposed = first.missing()
         refitted = {c.effect: c for c in first.candidates if c.fit is not None}
@@ -699,6 +789,96 @@ def swap_study(
         if progress is not None:
             progress(row)
     return rows
+
+
+#: Truths of the model-term group study (:func:`term_group_study`): the swap study's (each
+#: with near-collinear catalogue rivals) and the even pair SINDy confuses (x², ẋ²).
+TERM_TRUTHS: tuple[str, ...] = (*SWAP_TRUTHS, "quadratic_stiffness", "velocity_squared")
+
+
+def term_group_study(
+    campaigns: int,
+    *,
+    truths: Sequence[str] = TERM_TRUTHS,
+    curve_counts: Sequence[int] = (1, 3, 5, 10),
+    seed: int = 0,
+    progress: Callable[[dict], None] | None = None,
+    **options: Any,
+) -> list[dict[str, Any]]:
+    """Model-term groups (:attr:`~identification.criticism.criticism.Criticism.term_groups`)
+    over ``campaigns`` fast campaigns (truths and curve counts in turn, lab conditions as
+    :func:`null_study` draws them), each criticised with its truth's own structure: the
+    lab base model plus one effect ``T`` (the preset ``lab-hidden-<T>``). ``options`` go to
+    :func:`identification.criticism.criticism.criticize`.
+
+    Each trial of a stand-in ``C`` in place of a model term (``T`` or a term of the lab
+    base) gets its separation at the design, ``lambda``: the stand-in's structure refitted
+    to the noise-free truth — the population model's prediction at the campaign's points,
+    driven by the excitation they measured — with the campaign's own covariance, its
+    ``χ²`` in the campaign's metric. That is the noncentrality of the trial's ``Δχ²``
+    (the truth's structure fits the noise-free prediction exactly: ``lambda_truth``, ≈ 0):
+    where it is large the data can tell the term from ``C``, and a group holding ``C``
+    is a false flag. Each row also carries the campaign's verdict (a null campaign for the
+    truth's structure: groups do not alter it) and its groups.
+    """
+    rows = []
+    for k, effect, n_curves, truth, began, campaign in _campaigns(
+        campaigns, truths, curve_counts, seed, _hidden_preset
+    ):
+        present, levels, measured = campaign
+        crit = criticize(truth, measured, **options)
+        twin = _noise_free_twin(crit, truth)
+        trials = []
+        for trial in crit.term_trials:
+            entry = {key: trial[key] for key in ("term", "effect", "needed", "delta_chi2", "why",
+                                                 "standing")}  # fmt: skip
+            if trial["effect"] is not None:
+                stand_in = crit.base.model.without(trial["term"]).with_effect(trial["effect"], 0.0)
+                entry["lambda"] = _twin_chi2(crit, twin, stand_in)
+            trials.append(entry)
+        row = {
+            "campaign": k,
+            "truth": effect,
+            "n_curves": n_curves,
+            "levels": levels,
+            "conditions": present,
+            "verdict": crit.verdict,
+            "false_discovery": crit.verdict not in ("nothing missing", "drift"),
+            "lambda_truth": _twin_chi2(crit, twin, crit.base.model),
+            "trials": trials,
+            "term_groups": [[*g.effects] for g in crit.term_groups],
+            "seconds": time.perf_counter() - began,
+        }
+        rows.append(row)
+        if progress is not None:
+            progress(row)
+    return rows
+
+
+def _noise_free_twin(crit: Criticism, truth: JointModel) -> FitData:
+    """The criticism's data with every measured value replaced by the truth's prediction at
+    its point (driven by the point's measured excitation), keeping the campaign's metrics:
+    the covariance of the noisy campaign, estimated from its scatter."""
+    data = crit.data
+    data.metric()
+    data.metric(crit.base.weights)  # the metrics a refit asks for, estimated on the campaign
+    predicted = predict_channels(
+        truth, data.amplitude_m, data.channels, method=crit._method_for(truth),
+        excitation_harmonics=data.excitation_harmonics,
+    )  # fmt: skip
+    values = np.where(np.isfinite(data.values), predicted, np.nan)
+    return dataclasses.replace(data, values=values, _metrics=dict(data._metrics))
+
+
+def _twin_chi2(crit: Criticism, twin: FitData, model: JointModel) -> float:
+    """``model``'s structure refitted to the noise-free twin, its ``χ²`` there in the
+    campaign's metric."""
+    keys = set(twin._metrics)
+    fit = fit_backbones(model, twin, method=crit._method_for(model), weights=crit.weights or None)
+    if set(twin._metrics) != keys:
+        raise RuntimeError("the refit asked for a metric the campaign's data did not estimate")
+    z = crit.metric.whiten(twin.mean_residual(fit.predicted))
+    return float(z @ z)
 
 
 def _swap_decision(change: Mapping[str, Any] | None) -> str:

@@ -50,7 +50,11 @@ holds only the onset (its damping peak, at twice the slip amplitude, above the t
 is at most "partly explained" and grouped with a nearby mode outside the catalogue, which
 one sensor cannot tell from it (:func:`~identification.criticism.adequacy.onset_only`).
 Candidates whose signatures the data cannot separate form **groups** (a ranking inside
-a group is not a finding), with what would separate them. Up- and down-stepped branches
+a group is not a finding), with what would separate them. The model's own terms get
+**model-term groups** (:attr:`Criticism.term_groups`): a term the data need that a
+catalogue effect the model lacks reproduces in its place ("the model's ẋ² is consistent
+with quadratic stiffness x² on these data") — a statement of what the data cannot tell,
+never a proposal. Up- and down-stepped branches
 that differ by time, not amplitude, are reported as **drift**
 (:mod:`identification.criticism.drift`).
 
@@ -60,6 +64,7 @@ PyMC come in through ``pm_joint``'s adapter (this engine imports no PyMC).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 from collections.abc import Mapping, Sequence
@@ -70,6 +75,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.linalg import solve_triangular
 
 from identification.artifacts import atomic_write_text
 from identification.criticism import calibration as cal
@@ -110,6 +116,7 @@ __all__ = [
     "FailureRange",
     "Group",
     "Step",
+    "TermGroup",
     "criticize",
     "run_rounds",
 ]
@@ -142,6 +149,17 @@ SEPARATION = 6.63
 WORSE = 6.63
 #: Candidates refitted (nonlinear) at most, best linearised gains first.
 MAX_REFITS = 8
+#: The model's own terms that are never put in a model-term group: the linear pair every
+#: model holds (what the catalogue's nonlinear effects are measured against).
+LINEAR_PAIR = ("linear_stiffness", "viscous_damping")
+#: Catalogue effects refitted in place of one model term at most (:attr:`Criticism.term_groups`),
+#: best linearised match first.
+MAX_TERM_REFITS = 3
+#: Prescreen of a model-term group: a catalogue effect is refitted in place of a model term
+#: only when its linearised signature, off the model's other parameters, shares at least this
+#: much (squared cosine) with the term's; a rival that shares less cannot stand in for it
+#: within :data:`SEPARATION` unless the term itself is barely needed.
+TERM_OVERLAP = 0.5
 #: Verdicts.
 VERDICTS = (
     "nothing missing",
@@ -359,8 +377,98 @@ class Group:
 
 
 @dataclass(frozen=True)
+class TermGroup:
+    """A term of the criticised model that catalogue effects it lacks reproduce on these
+    data (:attr:`Criticism.term_groups`): a "cannot tell" statement, never a proposal.
+
+    Attributes
+    ----------
+    term
+        The model's effect.
+    coefficient
+        Its fitted coefficient.
+    needed
+        ``χ²`` the model loses when the term is removed and the rest refitted (at least the
+        calibrated threshold: the data need it).
+    effects
+        The term, then the catalogue effects that stand in for it.
+    separation
+        Per stand-in: ``χ²`` of the model with it in place of the term (refitted) less the
+        model's: below :data:`SEPARATION` (it fits as well as the term or better; at
+        ``−SEPARATION`` or below the data prefer it: :attr:`favoured`).
+    separated_by
+        What measurement would tell them apart.
+    fits
+        Per stand-in: the refitted model with it in place of the term.
+    """
+
+    term: str
+    coefficient: float
+    needed: float
+    effects: tuple[str, ...]
+    separation: dict[str, float]
+    separated_by: str
+    fits: dict[str, FitResult] = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def alternatives(self) -> tuple[str, ...]:
+        return self.effects[1:]
+
+    @property
+    def favoured(self) -> tuple[str, ...]:
+        """Stand-ins that fit better than the term by more than :data:`SEPARATION`: the data
+        tell them apart and prefer the stand-in."""
+        return tuple(e for e in self.alternatives if self.separation[e] <= -SEPARATION)
+
+    @property
+    def text(self) -> str:
+        spec = get_effect(self.term)
+        rivals = " or ".join(
+            f"{effect.replace('_', ' ')} {get_effect(effect).term} (Δχ² "
+            f"{self.separation[effect]:+.2g} in its place"
+            + (", a better fit)" if effect in self.favoured else ")")
+            for effect in self.alternatives
+        )
+        tell = (
+            f"they fit better with {', '.join(self.favoured)} in its place"
+            if self.favoured
+            else "they cannot tell which it is"
+        )
+        return (
+            f"the model's {spec.term} ({self.term.replace('_', ' ')}, {self.coefficient:+.3g}) "
+            f"is consistent with {rivals} on these data: the data need the term (removing it "
+            f"costs Δχ² {self.needed:.3g}); {tell} (a reading of the model's terms, not a "
+            f"proposal); what would separate them: {self.separated_by}"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "term": self.term,
+            "coefficient": self.coefficient,
+            "needed_delta_chi2": self.needed,
+            "effects": list(self.effects),
+            "separation": self.separation,
+            "separated_by": self.separated_by,
+            "favoured": list(self.favoured),
+            "rmse": {
+                effect: {
+                    "frequency_hz": fit.frequency_rmse_hz,
+                    "damping_ratio": fit.damping_rmse,
+                    "harmonics": fit.harmonic_rmse,
+                }
+                for effect, fit in self.fits.items()
+            },
+            "text": self.text,
+        }
+
+
+@dataclass(frozen=True)
 class Step:
-    """One step of the criticism loop: the model and how well it fits."""
+    """One step of the criticism loop: the model and how well it fits.
+
+    ``added`` and ``removed`` are the effects this step's model gained and lost against
+    the previous step's (an addition, then a swap's replacement; empty for the start).
+    """
 
     action: str
     equation: str
@@ -370,12 +478,16 @@ class Step:
     harmonic_rmse: float | None
     information_criterion: float
     criterion: str
+    added: tuple[str, ...] = ()
+    removed: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "action": self.action,
             "equation": self.equation,
             "effects": list(self.effects),
+            "added": list(self.added),
+            "removed": list(self.removed),
             "frequency_rmse_hz": self.frequency_rmse_hz,
             "damping_rmse": self.damping_rmse,
             "harmonic_rmse": self.harmonic_rmse,
@@ -385,7 +497,10 @@ class Step:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Step:
-        return cls(**{**data, "effects": tuple(data["effects"])})
+        """A step from :meth:`to_dict` (steps written before ``added``/``removed`` existed
+        read with both empty)."""
+        tuples = {k: tuple(data.get(k, ())) for k in ("effects", "added", "removed")}
+        return cls(**{**data, **tuples})
 
 
 # --------------------------------------------------------------------------
@@ -412,6 +527,9 @@ class Criticism:
     swaps
         The changes the swap step tried after this round's addition
         (:meth:`swap`), each with whether it was kept.
+
+    ``added``/``removed`` (keywords) are what this model gained and lost against the
+    previous step's (:class:`Step`).
     """
 
     def __init__(
@@ -434,6 +552,8 @@ class Criticism:
         prefitted: Mapping[str, FitResult] | None = None,
         executor: Any = None,
         swaps: Sequence[Mapping[str, Any]] = (),
+        added: Sequence[str] = (),
+        removed: Sequence[str] = (),
     ) -> None:
         if criterion not in ("aic", "bic"):
             raise ValueError(f"criterion must be 'aic' or 'bic', got {criterion!r}")
@@ -468,6 +588,8 @@ class Criticism:
             harmonic_rmse=self.fit.harmonic_rmse,
             information_criterion=float(self.fit.information_criterion(criterion)),
             criterion=criterion,
+            added=tuple(added),
+            removed=tuple(removed),
         )
         previous = list(history)
         if previous and previous[-1].equation == step.equation:
@@ -954,7 +1076,7 @@ class Criticism:
                     Group(
                         tuple(c.effect for c in members),
                         {c.effect: self._separation(best, c) for c in members[1:]},
-                        self._what_separates(members),
+                        self._what_separates([(c.effect, c.fit.model) for c in members]),
                     )
                 )
             remaining = [c for c in remaining if c not in members]
@@ -963,15 +1085,16 @@ class Criticism:
                 out.append(Group((c.effect, NEARBY_MODE), {}, _separates_nearby_mode(c.fit.model)))
         return out
 
-    def _what_separates(self, members: Sequence[Candidate]) -> str:
-        """What measurement would separate the group, from where the fitted models'
-        predictions differ most relative to today's standard errors: a wider amplitude
-        range, the harmonics (their size or phase, or the records' harmonics where the
-        backbones carry none), or more accurate damping or frequency."""
+    def _what_separates(self, members: Sequence[tuple[str, JointModel]]) -> str:
+        """What measurement would separate the group (each member a name and its fitted
+        model, the first against each other), from where the fitted models' predictions
+        differ most relative to today's standard errors: a wider amplitude range, the
+        harmonics (their size or phase, or the records' harmonics where the backbones carry
+        none), or more accurate damping or frequency."""
         first, *rest = members
         return "; ".join(dict.fromkeys(self._separating(first, other) for other in rest))
 
-    def _separating(self, first: Candidate, other: Candidate) -> str:
+    def _separating(self, first: tuple[str, JointModel], other: tuple[str, JointModel]) -> str:
         data = self.data
         a_lo, a_hi = data.levels_m[0], data.levels_m[-1]
         outside = np.concatenate([np.geomspace(a_lo / 4, a_lo, 4)[:-1],
@@ -984,13 +1107,13 @@ class Criticism:
             if channel in data.channels and data.used[data.column(channel)]:
                 se[:, j] = self._standard_error[:, data.column(channel)]
 
-        def predict(c: Candidate, amplitudes: np.ndarray) -> np.ndarray:
-            return self.predict_at(c.fit.model, amplitudes, channels, method="multi")
+        def predict(member: tuple[str, JointModel], amplitudes: np.ndarray) -> np.ndarray:
+            return self.predict_at(member[1], amplitudes, channels, method="multi")
 
         inside = np.abs(predict(first, data.levels_m) - predict(other, data.levels_m)) / se
         edges = np.vstack([np.repeat(se[:1], 3, axis=0), np.repeat(se[-1:], 3, axis=0)])
         beyond = np.abs(predict(first, outside) - predict(other, outside))[:, :2] / edges[:, :2]
-        names = f"{first.effect} and {other.effect}"
+        names = f"{first[0]} and {other[0]}"
         options = []
         if np.isfinite(beyond).any():
             i, j = np.unravel_index(np.nanargmax(beyond), beyond.shape)
@@ -1025,6 +1148,114 @@ class Criticism:
                 f"(at most {score:.1g} standard errors apart in any channel)"
             )
         return text
+
+    @cached_property
+    def _term_base(self) -> FitResult:
+        """What the model-term trials compare with: the refitted base model, or with a
+        posterior (whose median is judged as given) the model's structure refitted, as the
+        stand-ins are."""
+        return self.base if self.posterior is None else self._refit_structure(self.base.model)
+
+    @cached_property
+    def term_trials(self) -> list[dict[str, Any]]:
+        """The trials behind :attr:`term_groups`, one per model term and catalogue effect
+        refitted in its place: ``term``, ``effect``, ``needed`` (what removing the term
+        costs), ``delta_chi2`` (the model's ``χ²`` less the stand-in's: positive, it fits
+        better), ``why`` (its objections, empty when none), ``standing`` (it joins the
+        term's group) and ``fit``. Terms the data do not need get no trial (one row with
+        ``effect`` None records what removing them cost)."""
+        base = self._term_base
+        model = base.model
+        rivals = {t: self._term_rivals(t) for t in model.effects if t not in LINEAR_PAIR}
+        rivals = {t: r for t, r in rivals.items() if r and model.coefficient(t) != 0}
+        if not rivals:
+            return []
+        chi2 = self._chi2(base)
+        removed = self._refits([model.without(t) for t in rivals])
+        cost = {t: self._chi2(fit) - chi2 for t, fit in zip(rivals, removed, strict=True)}
+        needed = [t for t in rivals if cost[t] >= self.threshold]
+        pairs = [(t, effect) for t in needed for effect in rivals[t]]
+        fits = self._refits([model.without(t).with_effect(e, 0.0) for t, e in pairs])
+        before = self._channel_chi2(base)
+        trials = [
+            {"term": t, "effect": None, "needed": cost[t], "delta_chi2": None, "why": "",
+             "standing": False, "fit": None}
+            for t in rivals if t not in needed
+        ]  # fmt: skip
+        for (term, effect), fit in zip(pairs, fits, strict=True):
+            why = "; ".join(self._objections(fit, before))
+            gain = chi2 - self._chi2(fit)
+            trials.append({
+                "term": term, "effect": effect, "needed": cost[term], "delta_chi2": gain,
+                "why": why, "standing": not why and gain > -SEPARATION, "fit": fit,
+            })  # fmt: skip
+        return trials
+
+    @cached_property
+    def term_groups(self) -> list[TermGroup]:
+        """The model's own terms that catalogue effects it lacks reproduce on these data.
+
+        For each term beyond the linear pair (:data:`LINEAR_PAIR`) that the data need —
+        removing it and refitting the rest costs at least the calibrated :attr:`threshold`,
+        the gain that would make it significant were it missing (the swap step's rule for
+        keeping an effect) — the catalogue effects whose linearised signature overlaps the
+        term's (:meth:`_term_rivals`) are refitted in its place (as :meth:`swap` refits;
+        :attr:`term_trials`). Those that fit no worse than :data:`SEPARATION` below the
+        model (the data cannot tell the term from them, or prefer them:
+        :attr:`TermGroup.favoured`), are admissible and make no channel worse beyond its
+        noise (:meth:`_objections`) form a group with the term, with what would separate
+        them. Each stand-in replaces the one term: where several of the model's terms
+        together reproduce an effect, each is tried alone (e.g. SINDy's x³ and ẋ² for an
+        exponential spring: either one's replacement by it fits as well).
+
+        A group is a "cannot tell" statement, never a proposal: :attr:`verdict` and
+        :meth:`missing` do not depend on it. With a posterior the comparison is with the
+        model's structure refitted, as the stand-ins are.
+        """
+        model = self._term_base.model
+        out = []
+        for term in dict.fromkeys(t["term"] for t in self.term_trials):
+            standing = [t for t in self.term_trials if t["term"] == term and t["standing"]]
+            if not standing:
+                continue
+            fits = {t["effect"]: t["fit"] for t in standing}
+            members = [(f"the model's {term}", model)] + [(e, f.model) for e, f in fits.items()]
+            out.append(
+                TermGroup(
+                    term, model.coefficient(term), standing[0]["needed"], (term, *fits),
+                    {t["effect"]: -t["delta_chi2"] for t in standing},
+                    self._what_separates(members), fits,
+                )
+            )  # fmt: skip
+        return out
+
+    def _term_rivals(self, term: str) -> list[str]:
+        """Catalogue effects the model lacks whose linearised signature may stand in for
+        ``term``'s: both off the model's other parameters (whitened, as the statistics see
+        them), the squared cosine between the term's coefficient column and the effect's
+        best shape column at least :data:`TERM_OVERLAP`; :data:`MAX_TERM_REFITS` at most,
+        best first (none when the term's coefficient is not a free parameter)."""
+        problem = self.problem
+        free = list(self.base.free) or default_free(self.base.model)
+        if term not in free or not problem.candidates.shape[1]:
+            return []
+        factor = self.observed.frame["factor"]
+        white = solve_triangular(factor, np.hstack([problem.base, problem.candidates]), lower=True)
+        own, columns = white[:, : len(free)], white[:, len(free) :]
+        others = own[:, [i for i, n in enumerate(free) if n.split(".")[0] != term]]
+
+        def off(x: np.ndarray) -> np.ndarray:
+            return x - others @ np.linalg.lstsq(others, x, rcond=None)[0]
+
+        signature, columns = off(own[:, free.index(term)]), off(columns)
+        norms = np.sum(columns**2, axis=0) * (signature @ signature)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            overlap = np.where(norms > 0, (signature @ columns) ** 2 / norms, 0.0)
+        best: dict[str, float] = {}
+        for direction, value in zip(problem.directions, overlap, strict=True):
+            best[direction.effect] = max(best.get(direction.effect, 0.0), float(value))
+        ranked = sorted((e for e in best if best[e] >= TERM_OVERLAP), key=lambda e: -best[e])
+        return ranked[:MAX_TERM_REFITS]
 
     @property
     def ambiguous(self) -> list[dict[str, Any]]:
@@ -1125,8 +1356,9 @@ class Criticism:
             )
         fit = self._extended_fit(effect, **shape)
         return self._successor(
-            fit, [c for c in self.candidate_effects if c != effect], self.rounds, f"+ {effect}"
-        )
+            fit, [c for c in self.candidate_effects if c != effect], self.rounds, f"+ {effect}",
+            added=(effect,),
+        )  # fmt: skip
 
     def _successor(
         self,
@@ -1136,9 +1368,11 @@ class Criticism:
         action: str,
         swaps: Sequence[Mapping[str, Any]] = (),
         history: Sequence[Step] | None = None,
+        added: Sequence[str] = (),
+        removed: Sequence[str] = (),
     ) -> Criticism:
         """The criticism of ``fit``'s model on the same data and settings, continuing
-        ``history`` (default: this one's)."""
+        ``history`` (default: this one's); ``added``/``removed`` as :class:`Step`'s."""
         return Criticism(
             fit.model,
             self.data,
@@ -1155,6 +1389,8 @@ class Criticism:
             prefitted={f"base:{fit.method}": fit},
             executor=self.executor,
             swaps=swaps,
+            added=added,
+            removed=removed,
         )
 
     # ------------------------------------------------------------ stepwise loop
@@ -1186,9 +1422,30 @@ class Criticism:
     def _refit_structure(self, model: JointModel) -> FitResult:
         """``model``'s structure refitted to the data (a new effect at coefficient 0 gets
         its start scanned, as :meth:`add` does)."""
-        return fit_backbones(
-            model, self.data, method=self._method_for(model), weights=self.weights or None
-        )
+        return self._refits([model])[0]
+
+    def _refits(self, models: Sequence[JointModel]) -> list[FitResult]:
+        """Each model's structure refitted (:meth:`_refit_structure`); each a task on
+        :attr:`executor` when there is one and more than one model (the same serial fit,
+        so the result does not depend on where it ran)."""
+        options = [{"method": self._method_for(m), "weights": self.weights or None} for m in models]
+        if self.executor is None or len(models) < 2:
+            return [fit_backbones(m, self.data, **o) for m, o in zip(models, options, strict=True)]
+        futures = [
+            self.executor.submit(fit_backbones, m, self.data, **o)
+            for m, o in zip(models, options, strict=True)
+        ]
+        return [future.result() for future in futures]
+
+    def _objections(self, fit: FitResult, before: Mapping[str, float]) -> list[str]:
+        """Why a refitted replacement cannot stand in for what it replaced, in words: what
+        makes it inadmissible as physics, and the channel groups it makes worse beyond their
+        noise against ``before`` (their ``χ²``; :func:`_worse`). Empty: it can."""
+        table = mean_prediction(self.data, fit.predicted)
+        f, z = self.data.column("frequency_hz"), self.data.column("damping_ratio")
+        problems = admissibility(fit.model, self.data.levels_m, table[:, f], table[:, z])
+        worse = _worse(before, self._channel_chi2(fit), self.calibration.channel_bounds)
+        return [*problems, *(f"{g} worse" for g in worse)]
 
     def swap(self, alternatives: Mapping[str, Sequence[str]], last: str) -> Criticism:
         """The backward/swap step of forward-backward stepwise selection.
@@ -1201,15 +1458,13 @@ class Criticism:
         not be significant); it is replaced when a replacement gains more than
         :data:`SEPARATION` (the data tell the two apart), is admissible and makes no channel
         worse beyond its noise. The best replacement wins over a removal; one change per
-        round. Every trial is recorded in :attr:`swaps` of the criticism returned: this
-        one when nothing changed, else the criticism of the changed model.
+        round. Every trial is recorded in :attr:`swaps` of the criticism returned: a copy
+        of this one when nothing changed (this one's :attr:`swaps` are left as they were),
+        else the criticism of the changed model.
         """
         model = self.base.model
         chi2 = self._chi2(self.base)
         before = self._channel_chi2(self.base)
-        bounds = self.calibration.channel_bounds
-        levels = self.data.levels_m
-        f, z = self.data.column("frequency_hz"), self.data.column("damping_ratio")
         trials: list[dict[str, Any]] = []
         fits: list[FitResult] = []
         for earlier in [e for e in alternatives if e in model and e != last]:
@@ -1224,12 +1479,9 @@ class Criticism:
                 if other in model:
                     continue
                 fit = self._refit_structure(model.without(earlier).with_effect(other, 0.0))
-                table = mean_prediction(self.data, fit.predicted)
-                problems = admissibility(fit.model, levels, table[:, f], table[:, z])
-                worse = _worse(before, self._channel_chi2(fit), bounds)
                 trials.append({
                     "remove": earlier, "add": other, "delta_chi2": chi2 - self._chi2(fit),
-                    "kept": False, "why": "; ".join([*problems, *(f"{g} worse" for g in worse)]),
+                    "kept": False, "why": "; ".join(self._objections(fit, before)),
                     "keep_if": f"gain > {SEPARATION:.4g}, admissible, no channel worse",
                 })  # fmt: skip
                 fits.append(fit)
@@ -1246,19 +1498,25 @@ class Criticism:
         elif removals:
             chosen = max(removals, key=lambda i: trials[i]["delta_chi2"])
         else:
-            self.swaps = trials
-            return self
+            # The same model, carrying the trials: a shallow copy shares the refits and the
+            # calibration already computed, and leaves this criticism's swaps as they were.
+            unchanged = copy.copy(self)
+            unchanged.swaps = trials
+            return unchanged
         trials[chosen]["kept"] = True
         change, fit = trials[chosen], fits[chosen]
         candidates = [c for c in self.candidate_effects if c != change["add"]]
         words = f"− {change['remove']}" + (f" + {change['add']}" if change["add"] else "")
+        step = self.history[-1]
         return self._successor(
             fit,
             [*candidates, change["remove"]],
             self.previous_rounds,
-            f"{self.history[-1].action}; swap {words}",
+            f"{step.action}; swap {words}",
             trials,
             self.history[:-1],  # the swapped model takes this round's step
+            added=(*step.added, *([change["add"]] if change["add"] else [])),
+            removed=(*step.removed, change["remove"]),
         )
 
     # ------------------------------------------------------------------- text
@@ -1316,6 +1574,8 @@ class Criticism:
             f"counts: {len(self.candidate_effects)} catalogue effects tried, "
             f"{sum(c.fit is not None for c in self.candidates)} refitted, {len(proposed)} "
             f"proposed, {len(self.groups)} ambiguity group{'s' if len(self.groups) != 1 else ''}"
+            f", {len(self.term_groups)} model-term group"
+            f"{'s' if len(self.term_groups) != 1 else ''}"
         )
         if not proposed:
             lines.append("missing: nothing proposed")
@@ -1329,6 +1589,7 @@ class Criticism:
                 )  # fmt: skip
                 lines.append(f"improves the fit but does not explain it: {c.effect} ({why})")
         lines += [g.text for g in self.groups]
+        lines += [g.text for g in self.term_groups]
         lines += [f"drift: {d.text}" for d in self.drift if d.significant]
         if self.significant:
             lines.append(f"free-form reference: {self._shape_words()}")
@@ -1393,6 +1654,7 @@ class Criticism:
             "explained_share": self.explained_share,
             "ranking": [_ranking_entry(c) for c in self.missing()],
             "groups": [g.to_dict() for g in self.groups],
+            "term_groups": [g.to_dict() for g in self.term_groups],
             "swaps": self.swaps,
             "summary": self.summary(),
         }
@@ -1451,6 +1713,7 @@ class Criticism:
             "no_solution": self._no_solution_texts(),
             "ranking": [_ranking_entry(c) for c in self.missing()],
             "groups": [g.to_dict() for g in self.groups],
+            "term_groups": [g.to_dict() for g in self.term_groups],
             "ambiguous": self.ambiguous,
             "candidates": [c.to_dict() for c in self.candidates],
             "drift": [d.to_dict() for d in self.drift],

@@ -1,0 +1,134 @@
+"""Model-term groups of the criticism (a term of the criticised model that a catalogue
+effect it lacks reproduces on the data), their count in the hidden-effect study, and the
+swap step's result when nothing changes."""
+
+import json
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+from identification.criticism import criticism as engine
+from identification.criticism.criticism import criticize
+from identification.fitting.least_squares import fit_backbones
+from identification.model import JointModel
+from identification.rig import RIG_PRESETS
+from pm_joint.studies import StudyResult, simulated_campaign
+
+W0 = 2 * np.pi * 101.0
+K0 = W0**2
+C0 = 2 * 0.003 * W0
+
+
+@pytest.fixture(scope="module")
+def arch():
+    """The lab arch: an x² spring (and x³) the truth holds, a start that holds ẋ² instead,
+    its coefficient fitted to the campaign (frequency, damping and harmonics), as SINDy's
+    polynomial start on the rig does (tests/test_sindy.py: the pair is not told apart on
+    backbones)."""
+    truth = RIG_PRESETS["lab-hidden-quadratic-stiffness"].model
+    measured = simulated_campaign(truth, 3, seed=1, levels=8)
+    stand_in = truth.without("quadratic_stiffness").with_effect("velocity_squared", 0.0)
+    start = fit_backbones(stand_in, measured).model
+    return truth, measured, start, criticize(start, measured)
+
+
+def test_a_start_term_standing_in_for_the_hidden_effect_is_grouped_with_it(arch):
+    """The group of the model's ẋ² names quadratic stiffness, the truth's term, in words
+    in the summary, the JSON and every round's report; it is a statement, not a proposal:
+    the start is adequate (nothing missing, nothing proposed). The group is small (the
+    term and at most three stand-ins), not the catalogue."""
+    truth, _, start, crit = arch
+    assert start.coefficient("velocity_squared") > 0
+    assert crit.verdict == "nothing missing" and crit.missing() == [], crit.summary()
+    (group,) = [g for g in crit.term_groups if g.term == "velocity_squared"]
+    assert "quadratic_stiffness" in group.alternatives
+    assert len(group.effects) <= 1 + engine.MAX_TERM_REFITS
+    assert group.needed >= crit.threshold  # the data need the term
+    # the truth's x² in place of ẋ²: the refitted coefficient is the truth's sign and size
+    fitted = group.fits["quadratic_stiffness"].model.coefficient("quadratic_stiffness")
+    assert fitted == pytest.approx(truth.coefficient("quadratic_stiffness"), rel=0.3)
+    summary = crit.summary()
+    assert "the model's ẋ² (velocity squared, +" in summary
+    assert "quadratic stiffness x²" in summary and "not a proposal" in summary
+    report = json.loads(crit.to_json())
+    (entry,) = [g for g in report["term_groups"] if g["term"] == "velocity_squared"]
+    assert "quadratic_stiffness" in entry["effects"] and entry["text"] == group.text
+    assert report["rounds"][-1]["term_groups"] == report["term_groups"]
+    assert report["ranking"] == [] and report["verdict"] == "nothing missing"
+
+
+def test_the_study_counts_a_grouped_start_term_as_an_in_group_hit(arch):
+    """A start-adequate row whose start term is grouped with the hidden effect is an
+    in-group hit, kept apart from a plain hit; its key channel (the 2nd harmonic the arch
+    makes) is measured from the bare linear model to the start with x² in place of ẋ²."""
+    truth, measured, start, crit = arch
+    row = StudyResult("lab-hidden-quadratic-stiffness", 0, "sindy", truth,
+                      ("quadratic_stiffness",), measured, [], start, [crit])  # fmt: skip
+    assert row.start_adequate and row.term_group == {"quadratic_stiffness": "velocity_squared"}
+    assert row.term_reduction("harmonics") >= 0.8 and row.passed
+    assert row.outcome == "hit (start term group)"
+    table = row.row()
+    assert table["outcome"] == "hit (start term group)"
+    assert table["term_groups"][0]["term"] == "velocity_squared"
+    # the bare linear model predicts no harmonics at all: its harmonic RMSE is the measured size
+    linear = row._linear_fit
+    assert linear.harmonic_rmse > 2 * crit.base.harmonic_rmse
+
+
+def test_a_term_no_catalogue_effect_mimics_gets_no_group():
+    """Negative control: a Duffing spring tested to 2 mm, criticised with its own structure.
+    The data need x³ (removing it costs far more than the threshold) and the prescreen
+    does try rivals in its place, but none stands in: x·|x| and x·ẋ² make a channel worse,
+    and tanh fits only by cancelling a stiffer linear spring (inadmissible) — so no group.
+    (With the objections switched off, tanh joins a group and this test fails.)"""
+    truth = JointModel({"linear_stiffness": K0, "viscous_damping": C0, "cubic_stiffness": 1.4e10})
+    measured = simulated_campaign(truth, 3, seed=2, levels=8, amplitude_range_mm=(0.05, 2.0))
+    crit = criticize(truth, measured)
+    assert crit.verdict == "nothing missing", crit.summary()
+    rivals = crit._term_rivals("cubic_stiffness")
+    assert "tanh_saturation" in rivals  # the refits ran: the answer is theirs, not the screen's
+    assert crit.term_groups == []
+    assert "0 model-term groups" in crit.summary()
+    base = crit.base.model
+    tanh = crit._refit_structure(base.without("cubic_stiffness").with_effect("tanh_saturation", 0))
+    assert any("terms cancel" in p for p in crit._objections(tanh, crit._channel_chi2(crit.base)))
+
+
+def test_the_truths_term_is_not_grouped_with_a_stand_in_the_data_reject(arch):
+    """The other side of the arch: criticised with the truth's own structure, x² is not
+    grouped with ẋ². ẋ² in its place is admissible and makes no channel worse beyond its
+    noise, so it is the χ² alone (worse by more than SEPARATION) that tells them apart."""
+    truth, measured, _, _ = arch
+    crit = criticize(truth, measured)
+    assert crit.verdict == "nothing missing", crit.summary()
+    pair = ("quadratic_stiffness", "velocity_squared")
+    (trial,) = [t for t in crit.term_trials if (t["term"], t["effect"]) == pair]
+    assert trial["why"] == "" and trial["delta_chi2"] < -engine.SEPARATION
+    assert not any("velocity_squared" in g.effects for g in crit.term_groups)
+
+
+def test_a_swap_that_changes_nothing_leaves_the_criticism_as_it_was():
+    """The swap step's trials come back on the criticism it returns; the one it was called
+    on keeps its own (none)."""
+    truth = JointModel({"linear_stiffness": K0, "viscous_damping": C0, "cubic_stiffness": 1.4e10})
+    measured = simulated_campaign(truth, 3, seed=4, levels=6)
+    after = criticize(JointModel({"linear_stiffness": K0, "viscous_damping": C0}), measured).add(
+        "cubic_stiffness"
+    )
+    swapped = after.swap({"cubic_stiffness": []}, last="")
+    assert after.swaps == []
+    (trial,) = swapped.swaps
+    assert trial["remove"] == "cubic_stiffness" and not trial["kept"]
+    assert swapped.base.model == after.base.model and swapped.history == after.history
+
+
+def test_the_stand_ins_refit_on_an_executor_as_here(arch):
+    """The stand-ins' refits run as tasks on an executor when one is given; the groups do
+    not depend on where they ran."""
+    _, measured, start, crit = arch
+    with ThreadPoolExecutor(2) as pool:
+        remote = criticize(start, measured, executor=pool).term_groups
+    assert [(g.effects, g.separation) for g in remote] == [
+        (g.effects, g.separation) for g in crit.term_groups
+    ]
