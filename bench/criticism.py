@@ -13,14 +13,16 @@ linear-viscous model; ``sindy``: SINDy on the records; ``base``: the truth minus
 hidden), each through the criticism loop. Prints the table, the false discoveries of
 the null scenarios, the hit rate of the hidden ones and the verdicts of the
 out-of-catalogue ones, each with its two-sided 95 % Clopper–Pearson interval. A hidden
-row's outcome is "hit", "miss", "start adequate" or "hit (start term group)": a
+row's outcome is "hit", "miss", "start adequate", "hit (start term group)" or "hit (start
+term swapped)": a
 start-adequate row lacks the effect by name, yet its criticism finds nothing significant
 and its refitted residual is within the calibrated scatter in every channel group (the
 test a proposed candidate must pass), so the effect is not missing from that start. When
 the criticism's model-term groups say one of the start's terms is consistent with the
 hidden effect (and the effect in its place takes the key channel's error down ≥ 80 % from
 the bare linear model's), the row is an in-group hit, counted in the hit rate beside the
-hits; the other start-adequate rows are counted apart and left out of it. The sizes of
+hits — "swapped" when the data prefer the effect and the loop's swap step put it in the
+term's place; the other start-adequate rows are counted apart and left out of it. The sizes of
 the ambiguity groups and of the model-term groups are printed (a group of everything
 would say nothing).
 
@@ -92,8 +94,8 @@ STUDY_COLUMNS = (
     "explained_share", "threshold", "passed", "outcome", "seconds",
 )  # fmt: skip
 #: Outcomes of a hidden-effect row (:attr:`pm_joint.studies.StudyResult.outcome`).
-OUTCOMES = ("hit", "hit (start term group)", "miss", "start adequate")
-HITS = ("hit", "hit (start term group)")
+OUTCOMES = ("hit", "hit (start term swapped)", "hit (start term group)", "miss", "start adequate")
+HITS = ("hit", "hit (start term swapped)", "hit (start term group)")
 
 
 def bench(records: int, levels: int, hold_s: float) -> dict:
@@ -220,7 +222,8 @@ def study(scenarios, seeds: int, starts, assemblies: int, levels: int, rows_file
         + ", ".join(f"{n} {o}" for o, n in outcomes.items())
         + " (start adequate: the start lacks the effect by name, yet nothing is significant "
         "and its residual is within the calibrated scatter in every channel — not judged; "
-        "hit (start term group): such a row whose start term is grouped with it)"
+        "hit (start term group): such a row whose start term is grouped with it; swapped: "
+        "the loop put it in the term's place)"
     )
     sizes = _group_sizes(rows)
     print(

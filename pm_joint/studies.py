@@ -318,13 +318,17 @@ class StudyResult:
     @property
     def outcome(self) -> str | None:
         """Hidden scenarios: ``"hit"`` (:attr:`passed`, the start lacking the effect),
-        ``"hit (start term group)"`` (a start-adequate row whose start term is grouped with
-        the hidden effect, :attr:`term_group`, and :attr:`passed`), ``"start adequate"``
+        ``"hit (start term swapped)"`` (a start-adequate row whose start term is grouped with
+        the hidden effect, :attr:`term_group`, :attr:`passed`, and the loop's swap step put
+        the effect in its place: :attr:`hit`), ``"hit (start term group)"`` (the same, the
+        data not preferring the effect to the term), ``"start adequate"``
         (:attr:`start_adequate`, otherwise) or ``"miss"``; None for other kinds."""
         if self.kind != "hidden":
             return None
         if self.start_adequate:
-            return "hit (start term group)" if self.passed else "start adequate"
+            if not self.passed:
+                return "start adequate"
+            return "hit (start term swapped)" if self.hit else "hit (start term group)"
         return "hit" if self.passed else "miss"
 
     @property

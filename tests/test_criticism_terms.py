@@ -50,7 +50,10 @@ def test_a_start_term_standing_in_for_the_hidden_effect_is_grouped_with_it(arch)
     assert fitted == pytest.approx(truth.coefficient("quadratic_stiffness"), rel=0.3)
     summary = crit.summary()
     assert "the model's ẋ² (velocity squared, +" in summary
-    assert "quadratic stiffness x²" in summary and "not a proposal" in summary
+    assert (
+        "quadratic stiffness x²" in summary and "this criticism alone proposes nothing" in summary
+    )
+    assert group.favoured == ("quadratic_stiffness",)  # Δχ² beyond SEPARATION in its place
     report = json.loads(crit.to_json())
     (entry,) = [g for g in report["term_groups"] if g["term"] == "velocity_squared"]
     assert "quadratic_stiffness" in entry["effects"] and entry["text"] == group.text
@@ -74,6 +77,32 @@ def test_the_study_counts_a_grouped_start_term_as_an_in_group_hit(arch):
     # the bare linear model predicts no harmonics at all: its harmonic RMSE is the measured size
     linear = row._linear_fit
     assert linear.harmonic_rmse > 2 * crit.base.harmonic_rmse
+
+
+def test_the_loop_swaps_the_start_term_for_the_effect_the_data_prefer(arch):
+    """The loop's swap step for the model's own terms: the start's ẋ² is replaced by x²
+    (preferred by more than SEPARATION, admissible, no channel worse) as a round that adds
+    no effect; the refitted x² is the truth's within 30 %, the change is recorded on the
+    step and in the trials, and the study row is a hit by swap. A term the data cannot
+    tell from its stand-in (the exponential spring against SINDy's x³: within SEPARATION)
+    is not swapped: the loop stops with the start as it was."""
+    truth, measured, start, crit = arch
+    chain = engine.run_rounds(crit, 3)
+    last = chain[-1]
+    assert "velocity_squared" not in last.base.model
+    assert last.base.model.coefficient("quadratic_stiffness") == pytest.approx(
+        truth.coefficient("quadratic_stiffness"), rel=0.3
+    )
+    assert last.history[-1].added == ("quadratic_stiffness",)
+    assert last.history[-1].removed == ("velocity_squared",)
+    (kept,) = [t for t in last.swaps if t["kept"]]
+    assert (kept["remove"], kept["add"]) == ("velocity_squared", "quadratic_stiffness")
+    assert kept["delta_chi2"] > engine.SEPARATION
+    assert crit.swaps == [] and len(crit.history) == 1  # the start's criticism untouched
+    row = StudyResult("lab-hidden-quadratic-stiffness", 0, "sindy", truth,
+                      ("quadratic_stiffness",), measured, [], start, chain)  # fmt: skip
+    assert row.hit and row.outcome == "hit (start term swapped)"
+    assert row.added == ["quadratic_stiffness"] and row.kept == ["quadratic_stiffness"]
 
 
 def test_a_term_no_catalogue_effect_mimics_gets_no_group():

@@ -430,15 +430,16 @@ class TermGroup:
             for effect in self.alternatives
         )
         tell = (
-            f"they fit better with {', '.join(self.favoured)} in its place"
+            f"they fit better with {', '.join(self.favoured)} in its place (the loop's swap "
+            "step replaces the term; this criticism alone proposes nothing)"
             if self.favoured
-            else "they cannot tell which it is"
+            else "they cannot tell which it is (a reading of the model's terms, not a proposal)"
         )
         return (
             f"the model's {spec.term} ({self.term.replace('_', ' ')}, {self.coefficient:+.3g}) "
             f"is consistent with {rivals} on these data: the data need the term (removing it "
-            f"costs Δχ² {self.needed:.3g}); {tell} (a reading of the model's terms, not a "
-            f"proposal); what would separate them: {self.separated_by}"
+            f"costs Δχ² {self.needed:.3g}); {tell}; what would separate them: "
+            f"{self.separated_by}"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -1519,6 +1520,40 @@ class Criticism:
             removed=(*step.removed, change["remove"]),
         )
 
+    def swap_term(self) -> Criticism | None:
+        """The swap step for the model's own terms: the term replaced by the catalogue
+        effect its model-term group says the data prefer (:attr:`TermGroup.favoured`: it fits
+        better by more than :data:`SEPARATION` in the term's place, is admissible and makes
+        no channel worse beyond its noise — the rule :meth:`swap` keeps a replacement by);
+        the largest gain when several qualify. None when no group favours a stand-in.
+
+        A start the user brought (e.g. SINDy's ẋ² where the structure holds x², terms the
+        backbones hardly tell apart) is corrected the way an added effect is. Measured on
+        campaigns criticised with their truth's own structure (``bench/criticism_terms.py``,
+        110 campaigns, 288 stand-ins refitted): no stand-in was favoured over a true term.
+        The trials of every group are recorded in :attr:`swaps` of the criticism returned.
+        """
+        favoured = [(g, e) for g in self.term_groups for e in g.favoured]
+        if not favoured:
+            return None
+        group, effect = min(favoured, key=lambda pair: pair[0].separation[pair[1]])
+        trials = [
+            {"remove": g.term, "add": e, "delta_chi2": -g.separation[e],
+             "kept": (g, e) == (group, effect), "why": "",
+             "keep_if": f"gain > {SEPARATION:.4g}, admissible, no channel worse"}
+            for g in self.term_groups for e in g.alternatives
+        ]  # fmt: skip
+        candidates = [c for c in self.candidate_effects if c != effect]
+        return self._successor(
+            group.fits[effect],
+            [*candidates, group.term],
+            self.rounds,
+            f"swap − {group.term} + {effect}",
+            trials,
+            added=(effect,),
+            removed=(group.term,),
+        )
+
     # ------------------------------------------------------------------- text
     @property
     def caveats(self) -> list[str]:
@@ -1750,6 +1785,9 @@ def run_rounds(crit: Criticism, rounds: int) -> list[Criticism]:
 
     Each round adds the effect proposed first (:meth:`Criticism.missing`), then runs the
     swap step (:meth:`Criticism.swap`) over the effects added in earlier rounds. When
+    nothing is proposed, a term of the model that the data prefer a catalogue effect in
+    place of (:meth:`Criticism.swap_term`, e.g. a SINDy start's ẋ² for x²) is replaced
+    first, as a round of its own that adds no effect (at most ``rounds`` such swaps). When
     nothing is proposed but a :attr:`~Criticism.provisional` candidate exists (two
     effects missing: neither explains enough alone), it is added on trial and kept only
     when the next round's verdict is "explained" (an effect that, beside it, explains the
@@ -1763,11 +1801,16 @@ def run_rounds(crit: Criticism, rounds: int) -> list[Criticism]:
     """
     chain = [crit]
     alternatives: dict[str, list[str]] = {}
-    added = 0
+    added = term_swaps = 0
     while added < rounds:
         crit = chain[-1]
         proposed = crit.missing()
         if not proposed:
+            swapped = crit.swap_term() if term_swaps < rounds else None
+            if swapped is not None:
+                chain.append(swapped)
+                term_swaps += 1
+                continue
             trial = crit.provisional
             if trial is None or added + 2 > rounds:
                 break
