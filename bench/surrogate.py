@@ -32,7 +32,8 @@ Prints tables, then ONE JSON line with every figure (units in the keys), the
 targets and the paper's values.
 
     .venv/bin/python bench/surrogate.py [--boxes demo,wide] [--n-curves 2000]
-        [--epochs 400] [--head-degree 0|1|3] [--table5-sizes 200,300,400,500]
+        [--epochs 400] [--head-degree 0|1|3|4] [--damping-target decay_rate|ratio]
+        [--table5-sizes 200,300,400,500]
         [--demo-spread 0.2] [--min-curves 3]
 """
 
@@ -87,8 +88,13 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--batch-size", type=int, default=None)
     parser.add_argument(
         "--head-degree", type=int, default=0,
-        help="0: the paper's network alone; 1 or 3: the network on the residual of a linear or "
-        "cubic regression head",
+        help="0: the paper's network alone; 1, 3 or 4: the network on the residual of a linear, "
+        "cubic or quartic regression head",
+    )  # fmt: skip
+    parser.add_argument(
+        "--damping-target", choices=("decay_rate", "ratio"), default="decay_rate",
+        help="decay_rate (default, as the pipeline): head and networks learn 2π f ζ, the graph "
+        "divides by its own 2π f; ratio: ζ as it is (the paper's, before issue #15's fix)",
     )  # fmt: skip
     parser.add_argument(
         "--measured-in-training",
@@ -395,7 +401,10 @@ def main() -> None:
     grid = measured_grid(measured, 41, min_curves=args.min_curves)
     low, high = grid.range_m
     scatter = dict(zip(CHANNELS, assembly_scatter(measured, grid.amplitudes_m).T, strict=True))
-    config = TrainingConfig(seed=args.seed, progress=False, head_degree=args.head_degree)
+    config = TrainingConfig(
+        seed=args.seed, progress=False, head_degree=args.head_degree,
+        damping_target=args.damping_target,
+    )  # fmt: skip
     overrides = {
         "max_epochs": args.epochs,
         "finetune_epochs": args.finetune_epochs,

@@ -16,6 +16,10 @@ No network is trained; what is measured (on the demo campaign of
    spread at the end and at amplitudes every curve covers, beside all curves'
    spread there (is the 3-curve scatter the assembly scatter, or that of a
    selected subset?), and the χ² 95 % interval of σ / s for 3 curves.
+4. **The decay rate.** The damping ratio through ``σ = 2π f ζ``
+   (:func:`~surrogates.nets.to_decay_rate`, what ``damping_target="decay_rate"``
+   trains on): a cubic and a quartic fitted to σ, ζ recovered over the fit's own
+   frequency or the true one, beside the same degree fitted to ζ.
 
 Prints tables, then ONE JSON line.
 
@@ -38,6 +42,7 @@ from surrogates.baselines import ROWS_PER_COEFFICIENT, PolynomialBaseline
 from surrogates.dataset import generate_dataset
 from surrogates.evaluate import channel_errors
 from surrogates.grid import assembly_scatter, measured_grid, measured_on_grid
+from surrogates.nets import to_decay_rate
 
 
 def rows_and_degrees(model, names, grid, scatter, n_curves: int) -> dict:
@@ -65,6 +70,27 @@ def rows_and_degrees(model, names, grid, scatter, n_curves: int) -> dict:
             rmse = np.array(errors[degree][channel]["rmse_per_level"], dtype=float)
             out[f"{channel}_rmse_per_level_{name}"] = rmse.tolist()
             out[f"{channel}_{name}_to_scatter_per_level"] = (rmse / scatter[:, index]).tolist()
+    # Item 4: the damping through the decay rate σ = 2π f ζ: a cubic or quartic fitted to σ
+    # (every channel, as the head) and ζ = σ / 2π f with the fit's own frequency (as the
+    # exported graph) or the true one (what σ alone leaves), beside the same degree on ζ.
+    damping, frequency = CHANNELS.index("damping_ratio"), CHANNELS.index("frequency_hz")
+    rate = to_decay_rate(data.Y, weights, (damping, frequency))[0]
+    for degree in (3, 4):
+        on_zeta = PolynomialBaseline.fit(data.spec, data.X[train], data.Y[train], weights[train],
+                                         degree).predict(data.X[test])  # fmt: skip
+        on_rate = PolynomialBaseline.fit(data.spec, data.X[train], rate[train], weights[train],
+                                         degree).predict(data.X[test])  # fmt: skip
+        sigma = on_rate[..., damping]
+        for name, zeta in (
+            ("ratio", on_zeta[..., damping]),
+            ("rate_own_frequency", sigma / (2 * np.pi * on_rate[..., frequency])),
+            ("rate_true_frequency", sigma / (2 * np.pi * np.where(used[..., 0], truth[..., 0], 1))),
+        ):
+            error = np.where(used[..., damping], zeta - truth[..., damping], np.nan)
+            rmse = np.sqrt(np.nanmean(error**2, axis=0))
+            out[f"damping_degree{degree}_{name}_to_scatter_per_level"] = (
+                rmse / scatter[:, damping]
+            ).tolist()
     # Item 2: at the top amplitude, the cubic's frequency error by closeness to the fold.
     top = -1
     level = truth[..., CHANNELS.index("base_acceleration_m_s2")]
@@ -132,6 +158,17 @@ def main() -> None:
                 f"{show(s[f'{channel}_cubic_to_scatter_per_level'][-3:])}   (linear, last 3: "
                 f"{show(s[f'{channel}_linear_to_scatter_per_level'][-3:])})"
             )
+        for degree in (3, 4):
+            print(
+                f"   damping, degree {degree} ÷ scatter, last 3 amplitudes: fitted to "
+                + "; ".join(
+                    f"{label} {show(s[f'damping_degree{degree}_{key}_to_scatter_per_level'][-3:])}"
+                    for key, label in (
+                        ("ratio", "ζ"), ("rate_own_frequency", "σ, over its own 2π f"),
+                        ("rate_true_frequency", "σ, over the true 2π f"),
+                    )
+                )
+            )  # fmt: skip
         t = s["top"]
         print(
             f"   top amplitude: {t['test_curves_with_backbone']} of {t['of_test_curves']} test "

@@ -264,6 +264,11 @@ def surrogate_section(
         + f"; the paper's network ({network.get('parameters', {}).get('exported', '?')} "
         "weights)"
         + (f" on the residual of a degree-{head} regression head" if head else "")
+        + (
+            ", the damping learnt as the decay rate 2π f ζ"
+            if training["config"].get("damping_target") == "decay_rate"
+            else ""
+        )
         + ", exported to ONNX and run by onnxruntime.",
         f"Curves: {counts.get('requested', 0)} analytical requested, "
         f"{counts.get('generated', 0)} generated, every one kept "

@@ -327,8 +327,9 @@ def train_surrogate_stage(
     independent: their labels misfit them (the identified model's damping differs
     from the curves' by tens of assembly SDs), and in validation they would steer
     the early stopping. False trains on them too, as the paper. ``config``
-    defaults to the paper's network on the residual of a cubic head
-    (:class:`~surrogates.train.TrainingConfig`, ``head_degree=3``); ``max_epochs``
+    defaults to the paper's network on the residual of a cubic head, the damping
+    learnt as the decay rate ``2π f ζ`` (:class:`~surrogates.train.TrainingConfig`,
+    ``head_degree=3, damping_target="decay_rate"``); ``max_epochs``
     caps every stage.
 
     Writes ``out/surrogate.onnx`` and its sidecar (counts, test figures beside
@@ -364,7 +365,7 @@ def train_surrogate_stage(
         )  # fmt: skip
     dataset = dataset.with_splits(0.1, 0.1, seed=seed, hold_out_measured=hold_out_measured)
     dataset.save(out / "dataset.npz")
-    config = config or TrainingConfig(head_degree=3)
+    config = config or TrainingConfig(head_degree=3, damping_target="decay_rate")
     config = dataclasses.replace(config, seed=seed, progress=progress)
     if max_epochs is not None:
         config = dataclasses.replace(

@@ -38,7 +38,7 @@ from surrogates.grid import (
     measured_on_grid,
 )
 from surrogates.labels import label_misfit, misfit_weight
-from surrogates.nets import NetConfig
+from surrogates.nets import NetConfig, decay_rate_channels, to_decay_rate
 from surrogates.runtime import SurrogateRuntime, SurrogateSpec
 from surrogates.train import TrainingConfig, train_on_dataset
 
@@ -403,6 +403,68 @@ def test_a_head_short_of_rows_says_so_and_the_sidecar_records_its_degrees(tmp_pa
     runtime = SurrogateRuntime.load(export_surrogate(surrogate, tmp_path / "surrogate"))
     head = runtime.metadata["scalers"]["head"]
     assert head["degree"] == 3 and head["carried_degree"] == by_rule.tolist()
+
+
+def test_the_decay_rate_is_the_closed_forms_and_the_graph_divides_by_its_own_frequency(tmp_path):
+    # Closed form: ζ = A / (2 ω² a) = (C + ¼ v a²) / (2 ω), so the decay rate σ = ω ζ =
+    # (C + ¼ v a²) / 2 whatever the cubic stiffness: linear in v, the box's 2nd parameter.
+    data = grid_data(96, seed=3).with_splits(0.2, 0.2, seed=0)
+    weights = data.loss_weights()
+    rate = decay_rate_channels(data.spec.channels)
+    damping, frequency = rate
+    sigma, fit_weights = to_decay_rate(data.Y, weights, rate)
+    held = weights[..., damping] > 0
+    expected = np.broadcast_to((C + 0.25 * data.X[:, 1:2] * data.spec.amplitudes_m**2) / 2,
+                               held.shape)  # fmt: skip
+    assert held.sum() > 1000
+    np.testing.assert_allclose(sigma[..., damping][held], expected[held], rtol=1e-9)
+    np.testing.assert_array_equal(fit_weights, weights)  # frequency observed wherever damping is
+    unobserved = weights.copy()
+    unobserved[0, :, frequency] = 0.0
+    assert not to_decay_rate(data.Y, unobserved, rate)[1][0, :, damping].any()
+    with pytest.raises(ValueError, match="needs the frequency channel"):
+        decay_rate_channels(("amplitude_m", "damping_ratio"))
+    with pytest.raises(ValueError, match="damping_target"):
+        TrainingConfig(damping_target="log")
+
+    # A linear head fits σ exactly (the networks' residual is nil where it carries degree 1
+    # at every amplitude: a box without folds), so the exported graph's damping is σ over
+    # its own 2π f: 2π f ζ of its output is the closed form.
+    data = grid_data(
+        60, seed=3, bounds={"cubic_stiffness": (1e10, 3e10), "van_der_pol": (-2e5, 0.0)}
+    ).with_splits(0.2, 0.2)
+    held = data.loss_weights()[..., damping] > 0
+    expected = np.broadcast_to((C + 0.25 * data.X[:, 1:2] * data.spec.amplitudes_m**2) / 2,
+                               held.shape)  # fmt: skip
+    assert held.all()
+    net = NetConfig(latent_dim=4, conv_filters=(4, 4), ffnn_width=8, ffnn_depth=1)
+    config = TrainingConfig(net=net, max_epochs=2, finetune_epochs=1, progress=False,
+                            head_degree=1, damping_target="decay_rate")  # fmt: skip
+    surrogate = train_on_dataset(data, config)
+    runtime = SurrogateRuntime.load(export_surrogate(surrogate, tmp_path / "surrogate"))
+    assert runtime.metadata["training"]["config"]["damping_target"] == "decay_rate"
+    assert runtime.metadata["training"]["network"]["damping_target"] == "decay_rate"
+    test = data.in_split("test")
+    for predicted in (surrogate.predict(data.X[test]), runtime.predict(data.X[test])):
+        used = held[test]
+        sigma_out = 2 * np.pi * predicted[..., frequency] * predicted[..., damping]
+        np.testing.assert_allclose(sigma_out[used], expected[test][used], rtol=2e-5)
+        # ... over the graph's own ω, not the truth's: 3 epochs leave the frequency off by
+        # more than the tolerance (ζ over the true ω would fail the check above).
+        off = np.abs(predicted[..., frequency] / data.Y[test][..., frequency] - 1)[used]
+        assert off.max() > 1e-4
+    # The likelihood's pytensor translation of the graph (gradient samplers) has its ops.
+    import pytensor.tensor as pt
+
+    from pm_joint.forward.base import BACKBONE_COLUMNS
+    from pm_joint.forward.surrogate import surrogate_graph
+
+    graph = surrogate_graph(runtime, pt.as_tensor(data.X[test])).eval(mode="FAST_COMPILE")
+    np.testing.assert_allclose(
+        graph[..., BACKBONE_COLUMNS.index("damping_ratio")],
+        runtime.predict(data.X[test])[..., damping],
+        rtol=1e-5,
+    )
 
 
 @pytest.mark.slow  # 160 s (the likelihood graph through the ONNX Op); the demo test covers the mask

@@ -373,3 +373,25 @@ def test_a_widened_box_in_the_sidecar_is_a_hash_mismatch(tmp_path, trained):
     sidecar_path.write_text(json.dumps(sidecar))
     with pytest.raises(ValueError, match="hash mismatch: the sidecar's content"):
         SurrogateRuntime.load(folder)
+
+
+def test_a_quartic_head_carries_a_quartic_through_the_exported_graph(tmp_path):
+    # Backbones that are a quartic in the box-scaled parameters u at every level: the degree-4
+    # head fits them exactly (the networks' residual is nil), a cubic cannot.
+    rng = np.random.default_rng(4)
+    x = BOUNDS[:, 0] + rng.random((300, 4)) * np.ptp(BOUNDS, axis=1)
+    u = (x - BOUNDS[:, 0]) / np.ptp(BOUNDS, axis=1)
+    ramp = np.linspace(1.0, 2.0, LEVELS.size)
+    quartic = u[:, :1] ** 4 + 0.5 * u[:, 1:2] ** 2 * u[:, 2:3] * u[:, 3:4]
+    y = np.stack([1e-3 * (1 + ramp * quartic), 100 + ramp * quartic], axis=-1)
+    spec = SurrogateSpec(NAMES, BOUNDS, LEVELS, ("amplitude_m", "frequency_hz"))
+    fit, new = slice(0, 250), slice(250, 300)
+    errors = {}
+    for degree in (3, 4):
+        config = TrainingConfig(net=TINY, max_epochs=1, finetune_epochs=0, progress=False,
+                                head_degree=degree)  # fmt: skip
+        trained = train_surrogate(x[fit], y[fit], spec, config)
+        runtime = SurrogateRuntime.load(export_surrogate(trained, tmp_path / f"head{degree}"))
+        assert runtime.metadata["scalers"]["head"]["degree"] == degree
+        errors[degree] = np.max(np.abs(runtime.predict(x[new]) / y[new] - 1))
+    assert errors[4] < 2e-6 and errors[3] > 1e-4
