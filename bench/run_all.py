@@ -63,6 +63,16 @@ HEADLINES = (
     *_box_rows("demo", "… ÷ linear-regression baseline's"),
     *_box_rows("wide", "Surrogate, same network, ±50 % box, test: frequency RMSE ÷ linear "
                "baseline's"),
+    # the same box and command with a quartic head (bench/results/surrogate_wide_2000_head4.json)
+    ("Surrogate, same network, quartic head, ±50 % box, test: damping ratio ÷ assembly "
+     "scatter, worst amplitude (3 curves at the top)", "surrogate_wide_2000_head4",
+     "wide_damping_ratio_to_scatter_max", "×", "≤ 0.1", "—"),
+    ("… frequency ÷ assembly scatter, worst amplitude", "surrogate_wide_2000_head4",
+     "wide_frequency_to_scatter_max", "×", "≤ 0.1", "—"),
+    ("… frequency ÷ linear baseline's", "surrogate_wide_2000_head4", "wide_frequency_to_linear",
+     "×", "≤ 0.1", "—"),
+    ("… base acceleration ÷ assembly scatter, worst amplitude", "surrogate_wide_2000_head4",
+     "wide_base_acceleration_m_s2_to_scatter_max", "×", "≤ 0.1", "—"),
     ("Surrogate, demo box, test: MSE of amplitude at excitation levels", "surrogate",
      "demo_mse_amplitude_mm2", "mm²", "—", "5.119e-6 mm²"),
     ("Surrogate: 100 predictions (onnxruntime, 1 thread)", "surrogate", "demo_predict_100_ms",
