@@ -430,8 +430,8 @@ class TermGroup:
             for effect in self.alternatives
         )
         tell = (
-            f"they fit better with {', '.join(self.favoured)} in its place (the loop's swap "
-            "step replaces the term; this criticism alone proposes nothing)"
+            f"they fit better with {', '.join(self.favoured)} in its place (a reading, not a "
+            "proposal: when nothing is proposed, the loop's swap step replaces the term)"
             if self.favoured
             else "they cannot tell which it is (a reading of the model's terms, not a proposal)"
         )
