@@ -4,7 +4,7 @@ hidden-effect studies on the virtual rig."""
 
 import dataclasses
 import json
-from functools import cache
+from functools import lru_cache
 
 import numpy as np
 import pytest
@@ -362,7 +362,9 @@ def test_posterior_band_covers_its_population():
 # Hidden-effect studies on the virtual rig (PLL records, extraction, criticism)
 
 
-@cache
+# Bounded: a study keeps its records (about 200 MB), and the 140 slow rows of one run held in
+# an unbounded cache took the 24 GB machine out of memory; neighbouring tests still share.
+@lru_cache(maxsize=8)
 def study(scenario: str, seed: int = 0, start: str = "base"):
     return criticism_study(scenario, seed, start=start, assemblies=3, levels=8)
 
