@@ -84,10 +84,13 @@ def rows_and_degrees(model, names, grid, scatter, n_curves: int) -> dict:
         for name, zeta in (
             ("ratio", on_zeta[..., damping]),
             ("rate_own_frequency", sigma / (2 * np.pi * on_rate[..., frequency])),
-            ("rate_true_frequency", sigma / (2 * np.pi * np.where(used[..., 0], truth[..., 0], 1))),
-        ):
-            error = np.where(used[..., damping], zeta - truth[..., damping], np.nan)
-            rmse = np.sqrt(np.nanmean(error**2, axis=0))
+            ("rate_true_frequency", sigma / (2 * np.pi * np.where(
+                used[..., frequency], truth[..., frequency], 1))),
+        ):  # fmt: skip
+            estimate = on_zeta.copy()
+            estimate[..., damping] = zeta
+            errors = channel_errors(estimate, truth, weights[test], data.spec)["damping_ratio"]
+            rmse = np.array(errors["rmse_per_level"], dtype=float)
             out[f"damping_degree{degree}_{name}_to_scatter_per_level"] = (
                 rmse / scatter[:, damping]
             ).tolist()
