@@ -106,6 +106,14 @@ def main() -> None:
     figures["grouped_when_close"] = _rate(right, sum(t["standing"] for t in close), len(close))
     vetoed_close = sum(bool(t["why"]) for t in close)
     print(f"  of those not grouped: {vetoed_close} inadmissible or a channel worse")
+    # The term swap's false replacements (Criticism.swap_term): a stand-in the data prefer to
+    # a true term — admissible, no channel worse, better by more than SEPARATION.
+    preferred = sum(not t["why"] and t["delta_chi2"] > SEPARATION for t in trials)
+    figures["preferred_over_true_term"] = _rate(
+        "stand-ins preferred to a true term (the term swap would replace it)",
+        preferred,
+        len(trials),
+    )
     proposed = sum(r["false_discovery"] for r in rows)
     null = "campaigns with something proposed (each a null campaign for its truth's structure)"
     figures["null_verdicts"] = _rate(null, proposed, len(rows))

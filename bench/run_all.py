@@ -220,6 +220,11 @@ def criticism_studies(results: dict[str, dict]) -> str:
             f"{100 * flags['predicted_by_delta_chi2_rule']:.1f} %); null verdicts with "
             f"something proposed: {_counted(terms['null_verdicts'])}"
         )
+        if "preferred_over_true_term" in terms:
+            lines.append(
+                "- Stand-ins the data prefer to a true term (what the term swap would replace, "
+                f"falsely): {_counted(terms['preferred_over_true_term'])} stand-in refits"
+            )
     return "\n".join(lines) or "_Criticism studies not run._"
 
 
