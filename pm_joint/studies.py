@@ -35,6 +35,7 @@ from scipy import stats
 from identification.analytical.harmonic import backbone as harmonic_backbone
 from identification.analytical.pll import pll_backbones
 from identification.criticism.criticism import Criticism, criticize, run_rounds
+from identification.effects import CATALOGUE
 from identification.fitting.data import FitData
 from identification.fitting.least_squares import FitResult, fit_backbones
 from identification.fitting.prediction import predict_channels
@@ -43,7 +44,7 @@ from identification.measurements.extraction import extract_backbones
 from identification.measurements.records import Record
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS, rig_for_preset
-from identification.rig.presets import LAB_OUT_OF_CATALOGUE_SCENARIOS
+from identification.rig.presets import LAB_OUT_OF_CATALOGUE_SCENARIOS, lab_hidden_scenario
 from pm_joint.analysis import convergence_verdict
 from pm_joint.inference import HIERARCHICAL_TARGET_ACCEPT, hierarchical_model, sample
 from surrogates.dataset import BackboneDataset
@@ -89,20 +90,12 @@ KEY_CHANNEL = {
     "hidden-quadratic": "harmonics",
     "hidden-quadratic-damping": "damping_ratio",
     "hidden-coulomb": "damping_ratio",
-    "lab-hidden-quadratic-stiffness": "harmonics",
-    "lab-hidden-cubic-stiffness": "frequency_hz",
-    "lab-hidden-abs-stiffness": "frequency_hz",
-    "lab-hidden-quadratic-damping": "damping_ratio",
-    "lab-hidden-cubic-damping": "damping_ratio",
-    "lab-hidden-velocity-squared": "harmonics",
-    "lab-hidden-stiffness-damping-coupling": "harmonics",
-    "lab-hidden-displacement-velocity-squared": "frequency_hz",
-    "lab-hidden-van-der-pol": "damping_ratio",
-    "lab-hidden-coulomb-friction": "damping_ratio",
-    "lab-hidden-stribeck-friction": "damping_ratio",
-    "lab-hidden-tanh-saturation": "frequency_hz",
-    "lab-hidden-exponential": "frequency_hz",
-    "lab-hidden-microslip": "frequency_hz",
+    # each catalogue effect's lab scenario: the key channel its module states
+    **{
+        lab_hidden_scenario(name): effect.hidden_scenario.key_channel
+        for name, effect in CATALOGUE.items()
+        if effect.hidden_scenario is not None
+    },
 }
 _STEP_RMSE = {
     "frequency_hz": "frequency_rmse_hz",
@@ -635,11 +628,6 @@ def _campaigns(
         yield k, name, n_curves, truth, began, _lab_campaign(truth, n_curves, seed, k)
 
 
-def _hidden_preset(effect: str) -> str:
-    """The lab preset that hides ``effect`` in the lab base model."""
-    return "lab-hidden-" + effect.replace("_", "-")
-
-
 def null_study(
     campaigns: int,
     *,
@@ -741,7 +729,7 @@ def swap_study(
     """
     rows = []
     for k, effect, n_curves, truth, began, campaign in _campaigns(
-        campaigns, truths, curve_counts, seed, _hidden_preset
+        campaigns, truths, curve_counts, seed, lab_hidden_scenario
     ):
         present, levels, measured = campaign
         first = criticize(truth.without(effect), measured, **options)
@@ -827,7 +815,7 @@ def term_group_study(
     """
     rows = []
     for k, effect, n_curves, truth, began, campaign in _campaigns(
-        campaigns, truths, curve_counts, seed, _hidden_preset
+        campaigns, truths, curve_counts, seed, lab_hidden_scenario
     ):
         present, levels, measured = campaign
         crit = criticize(truth, measured, **options)

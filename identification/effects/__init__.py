@@ -34,20 +34,26 @@ from identification.effects.base import (
     ArrayNamespace,
     Effect,
     FitScale,
+    HiddenScenario,
     ShapeParameter,
     catalogue_of,
     force_dispatcher,
 )
+from identification.effects.linear_stiffness import EFFECT as _LINEAR_STIFFNESS
 from identification.effects.microslip import jenkins_force, jenkins_path
 from identification.effects.special import DEFAULT_SIGN_VELOCITY
+from identification.effects.viscous_damping import EFFECT as _VISCOUS_DAMPING
 
 __all__ = [
     "CATALOGUE",
     "DEFAULT_SIGN_VELOCITY",
+    "LINEAR_STIFFNESS",
     "MICROSLIP_INDEX",
+    "VISCOUS_DAMPING",
     "ArrayNamespace",
     "Effect",
     "FitScale",
+    "HiddenScenario",
     "ShapeParameter",
     "get_effect",
     "jenkins_force",
@@ -103,6 +109,10 @@ def _discover() -> dict[str, Effect]:
 
 #: Every effect, by catalogue name, in a fixed order (``Effect.index``).
 CATALOGUE: dict[str, Effect] = _discover()
+
+#: Names of the linear pair every model has (the stiffness and the viscous damping).
+LINEAR_STIFFNESS: str = _LINEAR_STIFFNESS.name
+VISCOUS_DAMPING: str = _VISCOUS_DAMPING.name
 
 #: Index of the hysteretic Jenkins element, for the numba kernels.
 MICROSLIP_INDEX = CATALOGUE["microslip"].index

@@ -8,7 +8,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from identification.effects.base import ArrayNamespace, Effect
+from identification.effects.base import ArrayNamespace, Effect, HiddenScenario
 
 
 @numba.njit(cache=True)
@@ -27,4 +27,9 @@ EFFECT = Effect(
     reading="one-sided contact / clearance",
     force=_force,
     stiffness=_stiffness,
+    hidden_scenario=HiddenScenario(
+        truth=lambda k0: -2.4e7,
+        description=("x|x| softens by 5 % at 2 mm"),
+        key_channel="frequency_hz",
+    ),
 )

@@ -33,6 +33,7 @@ __all__ = [
     "ArrayNamespace",
     "Effect",
     "FitScale",
+    "HiddenScenario",
     "ShapeParameter",
     "catalogue_of",
     "force_dispatcher",
@@ -167,6 +168,44 @@ def _no_fitted_reading(coefficient: float, shape: Mapping[str, float], scale: Fi
 
 
 # --------------------------------------------------------------------------
+# What validating an effect needs.
+
+#: Channels whose error a hidden effect must take down in the hidden-effect studies.
+KEY_CHANNELS = ("frequency_hz", "damping_ratio", "harmonics")
+
+
+@dataclass(frozen=True)
+class HiddenScenario:
+    """The lab scenario that hides an effect, and the channel it shows in.
+
+    The rig builds the preset ``lab-hidden-<name with dashes>`` from it and the
+    hidden-effect studies read :attr:`key_channel`, so a new effect module that
+    carries one joins the studies without edits elsewhere.
+
+    Attributes
+    ----------
+    truth
+        ``(k0) -> coefficient`` or ``{"coefficient": c, **shape}`` of the hidden term,
+        given the rig's small-amplitude stiffness ``k0`` (1/s², mass-normalised).
+    description
+        What the term does over the rig's 0.05–2 mm range, in words.
+    key_channel
+        The channel (:data:`KEY_CHANNELS`) whose error the found effect must take down.
+    on_hardening_base
+        The base model the effect hides from carries the rig's cubic hardening too.
+    """
+
+    truth: Callable[[float], float | Mapping[str, float]] = field(repr=False)
+    description: str
+    key_channel: str
+    on_hardening_base: bool = False
+
+    def __post_init__(self) -> None:
+        if self.key_channel not in KEY_CHANNELS:
+            raise ValueError(f"key_channel must be one of {KEY_CHANNELS}, got {self.key_channel!r}")
+
+
+# --------------------------------------------------------------------------
 # The effect record.
 
 
@@ -229,6 +268,9 @@ class Effect:
     fitted_reading
         ``(coefficient, shape, FitScale) -> str``: what the fitted numbers say,
         appended to :attr:`reading` (e.g. ``" (hardening)"``; "" for nothing).
+    hidden_scenario
+        The lab scenario that hides the effect and its key channel
+        (:class:`HiddenScenario`); None for the linear pair, which every model has.
     index
         Position in :data:`~identification.effects.CATALOGUE` (-1 until
         :func:`catalogue_of` registers the effect); the numba kernels dispatch on it.
@@ -259,6 +301,7 @@ class Effect:
     fitted_reading: Callable[[float, Mapping[str, float], FitScale], str] = field(
         default=_no_fitted_reading, repr=False
     )
+    hidden_scenario: HiddenScenario | None = field(default=None, repr=False)
     index: int = -1
     shape: tuple[str, ...] = field(init=False)
     defaults: dict[str, float] = field(init=False)

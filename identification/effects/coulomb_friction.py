@@ -13,7 +13,13 @@ from typing import Any
 import numba
 import numpy as np
 
-from identification.effects.base import ArrayNamespace, Effect, FitScale, ShapeParameter
+from identification.effects.base import (
+    ArrayNamespace,
+    Effect,
+    FitScale,
+    HiddenScenario,
+    ShapeParameter,
+)
 from identification.effects.special import DEFAULT_SIGN_VELOCITY, smooth_sign
 
 
@@ -40,4 +46,9 @@ EFFECT = Effect(
     damping=_damping,
     fitted_reading=_fitted_reading,
     coefficient_sign=1,
+    hidden_scenario=HiddenScenario(
+        truth=lambda k0: 0.2,
+        description=("Coulomb friction triples the damping at 0.05 mm, fading as 1/amplitude"),
+        key_channel="damping_ratio",
+    ),
 )

@@ -8,7 +8,7 @@ from typing import Any
 
 import numba
 
-from identification.effects.base import ArrayNamespace, Effect, FitScale
+from identification.effects.base import ArrayNamespace, Effect, FitScale, HiddenScenario
 
 
 @numba.njit(cache=True)
@@ -33,4 +33,9 @@ EFFECT = Effect(
     polynomial=True,
     stiffness=_stiffness,
     fitted_reading=_fitted_reading,
+    hidden_scenario=HiddenScenario(
+        truth=lambda k0: 1.4e10,
+        description=("x³ hardens by 5 % at 2 mm"),
+        key_channel="frequency_hz",
+    ),
 )

@@ -8,7 +8,7 @@ from typing import Any
 
 import numba
 
-from identification.effects.base import ArrayNamespace, Effect
+from identification.effects.base import ArrayNamespace, Effect, HiddenScenario
 
 
 @numba.njit(cache=True)
@@ -28,4 +28,9 @@ EFFECT = Effect(
     force=_force,
     polynomial=True,
     stiffness_per_omega_squared=_stiffness_per_omega_squared,
+    hidden_scenario=HiddenScenario(
+        truth=lambda k0: -1e5,
+        description=("x·ẋ² softens by 5 % at 2 mm"),
+        key_channel="frequency_hz",
+    ),
 )

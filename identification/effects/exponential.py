@@ -10,7 +10,13 @@ from typing import Any
 import numba
 import numpy as np
 
-from identification.effects.base import ArrayNamespace, Effect, FitScale, ShapeParameter
+from identification.effects.base import (
+    ArrayNamespace,
+    Effect,
+    FitScale,
+    HiddenScenario,
+    ShapeParameter,
+)
 
 
 @numba.njit(cache=True)
@@ -43,4 +49,9 @@ EFFECT = Effect(
     stiffness=_stiffness,
     shape_grid=_shape_grid,
     shape_bounds=_shape_bounds,
+    hidden_scenario=HiddenScenario(
+        truth=lambda k0: {"coefficient": 40.0, "x_s": 1e-3},
+        description=("exp(x/x_s) − 1 (x_s = 1 mm) hardens and leaves even harmonics"),
+        key_channel="frequency_hz",
+    ),
 )

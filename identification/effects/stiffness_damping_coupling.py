@@ -5,7 +5,7 @@ Even: no single-harmonic describing function (see ``quadratic_stiffness``).
 
 import numba
 
-from identification.effects.base import Effect
+from identification.effects.base import Effect, HiddenScenario
 
 
 @numba.njit(cache=True)
@@ -21,4 +21,9 @@ EFFECT = Effect(
     force=_force,
     parity="even",
     polynomial=True,
+    hidden_scenario=HiddenScenario(
+        truth=lambda k0: 1.6e5,
+        description=("x·ẋ (even) leaves a 2nd harmonic and softens at 2 mm"),
+        key_channel="harmonics",
+    ),
 )

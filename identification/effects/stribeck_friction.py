@@ -11,7 +11,13 @@ from typing import Any
 import numba
 import numpy as np
 
-from identification.effects.base import ArrayNamespace, Effect, FitScale, ShapeParameter
+from identification.effects.base import (
+    ArrayNamespace,
+    Effect,
+    FitScale,
+    HiddenScenario,
+    ShapeParameter,
+)
 from identification.effects.special import DEFAULT_SIGN_VELOCITY, smooth_sign
 
 
@@ -58,4 +64,12 @@ EFFECT = Effect(
     shape_bounds=_shape_bounds,
     fitted_reading=_fitted_reading,
     coefficient_sign=1,
+    hidden_scenario=HiddenScenario(
+        truth=lambda k0: {"coefficient": 0.3, "v_s": 0.1},
+        description=(
+            "Stribeck friction (v_s = 0.1 m/s) lifts the damping at 0.05 mm from 0.3 % to 1.2 "
+            "% and vanishes above 0.3 mm (faster than Coulomb)"
+        ),
+        key_channel="damping_ratio",
+    ),
 )

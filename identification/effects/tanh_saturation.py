@@ -10,7 +10,13 @@ from typing import Any
 import numba
 import numpy as np
 
-from identification.effects.base import ArrayNamespace, Effect, FitScale, ShapeParameter
+from identification.effects.base import (
+    ArrayNamespace,
+    Effect,
+    FitScale,
+    HiddenScenario,
+    ShapeParameter,
+)
 
 
 @numba.njit(cache=True)
@@ -42,4 +48,12 @@ EFFECT = Effect(
     stiffness=_stiffness,
     shape_grid=_shape_grid,
     shape_bounds=_shape_bounds,
+    hidden_scenario=HiddenScenario(
+        truth=lambda k0: {"coefficient": 20.0, "x_s": 5e-4},
+        description=(
+            "a saturating spring (10 % of the stiffness at rest, x_s = 0.5 mm) softens by "
+            "about 3.5 % at 2 mm"
+        ),
+        key_channel="frequency_hz",
+    ),
 )

@@ -7,7 +7,7 @@ from typing import Any
 
 import numba
 
-from identification.effects.base import ArrayNamespace, Effect
+from identification.effects.base import ArrayNamespace, Effect, HiddenScenario
 
 
 @numba.njit(cache=True)
@@ -27,4 +27,9 @@ EFFECT = Effect(
     force=_force,
     polynomial=True,
     damping=_damping,
+    hidden_scenario=HiddenScenario(
+        truth=lambda k0: 7.5e6,
+        description=("x²·ẋ raises the damping from 0.3 % to about 0.9 % at 2 mm"),
+        key_channel="damping_ratio",
+    ),
 )

@@ -36,6 +36,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from identification.effects import CATALOGUE
 from identification.model import JointModel
 from identification.rig.conditions import Controller, Drift, Sensors, Shaker
 from identification.rig.joints import (
@@ -54,6 +55,7 @@ __all__ = [
     "LAB_OUT_OF_CATALOGUE_SCENARIOS",
     "RIG_PRESETS",
     "RigPreset",
+    "lab_hidden_scenario",
 ]
 
 
@@ -311,77 +313,26 @@ RIG_PRESETS["lab-all-hardening"] = _lab_scenario(
     _ALL,
 )
 
-#: One catalogue effect hidden at a time under the lab conditions: effect, its terms, the
-#: base it hides from, what it does over 0.05–2 mm.
+
+def lab_hidden_scenario(effect: str) -> str:
+    """Name of the lab preset that hides the catalogue ``effect`` from its base model."""
+    return "lab-hidden-" + effect.replace("_", "-")
+
+
+#: One catalogue effect hidden at a time under the lab conditions, from each effect's own
+#: :class:`~identification.effects.base.HiddenScenario`: preset name → (its terms, the base
+#: it hides from beyond the linear pair, what it does over 0.05–2 mm).
 _LAB_HIDDEN = {
-    "quadratic-stiffness": (
-        {"quadratic_stiffness": -5e7},
-        _HARDENING,
-        "x² takes about 2 % off the 2 mm frequency (with a 2nd harmonic)",
-    ),
-    "cubic-stiffness": (_HARDENING, {}, "x³ hardens by 5 % at 2 mm"),
-    "abs-stiffness": ({"abs_stiffness": -2.4e7}, {}, "x|x| softens by 5 % at 2 mm"),
-    "quadratic-damping": (
-        {"quadratic_damping": 5.0},
-        {},
-        "ẋ|ẋ| raises the damping from 0.3 % to about 0.7 % at 2 mm",
-    ),
-    "cubic-damping": (
-        {"cubic_damping": 6.0},
-        {},
-        "ẋ³ raises the damping from 0.3 % to about 0.9 % at 2 mm",
-    ),
-    "velocity-squared": (
-        {"velocity_squared": 130.0},
-        {},
-        "ẋ² (even) shifts the mean and leaves a 2nd harmonic; softens at 2 mm",
-    ),
-    "stiffness-damping-coupling": (
-        {"stiffness_damping_coupling": 1.6e5},
-        {},
-        "x·ẋ (even) leaves a 2nd harmonic and softens at 2 mm",
-    ),
-    "displacement-velocity-squared": (
-        {"displacement_velocity_squared": -1e5},
-        {},
-        "x·ẋ² softens by 5 % at 2 mm",
-    ),
-    "van-der-pol": (
-        {"van_der_pol": 7.5e6},
-        {},
-        "x²·ẋ raises the damping from 0.3 % to about 0.9 % at 2 mm",
-    ),
-    "coulomb-friction": (
-        {"coulomb_friction": 0.2},
-        {},
-        "Coulomb friction triples the damping at 0.05 mm, fading as 1/amplitude",
-    ),
-    "stribeck-friction": (
-        {"stribeck_friction": {"coefficient": 0.3, "v_s": 0.1}},
-        {},
-        "Stribeck friction (v_s = 0.1 m/s) lifts the damping at 0.05 mm from "
-        "0.3 % to 1.2 % and vanishes above 0.3 mm (faster than Coulomb)",
-    ),
-    "tanh-saturation": (
-        {"tanh_saturation": {"coefficient": 20.0, "x_s": 5e-4}},
-        {},
-        "a saturating spring (10 % of the stiffness at rest, x_s = 0.5 mm) "
-        "softens by about 3.5 % at 2 mm",
-    ),
-    "exponential": (
-        {"exponential": {"coefficient": 40.0, "x_s": 1e-3}},
-        {},
-        "exp(x/x_s) − 1 (x_s = 1 mm) hardens and leaves even harmonics",
-    ),
-    "microslip": (
-        {"microslip": _microslip(0.06, 2e-4)},
-        _HARDENING,
-        "a Jenkins element softens by up to 2.6 % from 0.2 mm and lifts the damping "
-        "from 0.3 % to 1.25 %",
-    ),
+    lab_hidden_scenario(name): (
+        {name: effect.hidden_scenario.truth(_K0)},
+        _HARDENING if effect.hidden_scenario.on_hardening_base else {},
+        effect.hidden_scenario.description,
+    )
+    for name, effect in CATALOGUE.items()
+    if effect.hidden_scenario is not None
 }
-for _effect, (_hidden, _extra, _text) in _LAB_HIDDEN.items():
-    _name = f"lab-hidden-{_effect}"
+
+for _name, (_hidden, _extra, _text) in _LAB_HIDDEN.items():
     RIG_PRESETS[_name] = _lab_scenario(
         _name,
         {**_LINEAR, **_extra},
@@ -457,6 +408,6 @@ for _kind, (_physics, _spread, _text) in _LAB_OUT_OF_CATALOGUE.items():
 #: Lab scenarios whose truth is the base model's structure: nothing should be proposed.
 LAB_NULL_SCENARIOS: tuple[str, ...] = (*_ARTEFACT_SCENARIOS, "lab-all-hardening")
 #: Lab scenarios hiding one catalogue effect.
-LAB_HIDDEN_SCENARIOS: tuple[str, ...] = tuple(f"lab-hidden-{e}" for e in _LAB_HIDDEN)
+LAB_HIDDEN_SCENARIOS: tuple[str, ...] = tuple(_LAB_HIDDEN)
 #: Lab scenarios whose missing physics is not in the catalogue.
 LAB_OUT_OF_CATALOGUE_SCENARIOS: tuple[str, ...] = tuple(f"lab-{k}" for k in _LAB_OUT_OF_CATALOGUE)
