@@ -1,11 +1,9 @@
-"""Closed loop: the phase-locked-loop (PLL) controller of a phase-resonance test.
+"""Closed loop: the phase-locked loop (PLL) of a virtual phase-resonance test.
 
-A time-domain virtual phase-resonance test of a base-excited
-:class:`~identification.model.JointModel`, ``ẍ + f(x, ẋ) = −a_base(t)``, as the
-TRC rig and NLtest run it: an oscillator drives the shaker, a phase detector
-measures the response's fundamental harmonic, a PI controller moves the
-frequency until the response sits at phase resonance, and the excitation level
-is stepped with smooth ramps; each hold phase gives one backbone point.
+:func:`simulate_pll` runs the loop on one model, level after level, as the TRC
+rig and NLtest do; the kernels here also serve the batch
+(:mod:`identification.analytical.pll.batch`), and :class:`PLLResult` /
+:class:`PLLTimeSeries` are what both return.
 
 Conventions
 -----------

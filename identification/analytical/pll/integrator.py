@@ -10,6 +10,9 @@ equation stiff, so a sample step is split into enough sub-steps to keep every
 linearised eigenvalue inside RK4's stability region (:func:`stable_substeps`).
 The Jenkins element is evaluated at each RK stage from the anchor state of the
 step start and the anchor moves to the accepted state after the step.
+
+The two kernels here are inlined into the loops' kernels, whose numba cache
+checks only its own file: after editing them, ``make clean-cache``.
 """
 
 from __future__ import annotations
