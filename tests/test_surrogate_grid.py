@@ -27,7 +27,8 @@ from identification.artifacts import sha256_bytes
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
 from surrogates.baselines import MeanCurve, PolynomialBaseline, monomials
-from surrogates.dataset import BackboneDataset, _canonical_bytes, add_measured, generate_dataset
+from surrogates.dataset import BackboneDataset, add_measured, generate_dataset
+from surrogates.dataset.container import _canonical_bytes
 from surrogates.evaluate import accuracy_report, amplitudes_at_levels
 from surrogates.export import export_surrogate
 from surrogates.grid import (
