@@ -1,0 +1,323 @@
+"""The N-mode harmonic balance (identification.multimode) against independent answers.
+
+* a time integration written here (scipy ``solve_ivp``, forces written out by hand,
+  no package kernel) of a two-mode system with a cubic joint element and a
+  quadratic modal coupling: the forced steady state, and the conservative
+  nonlinear mode found by shooting;
+* a published internal resonance: the saturation of Nayfeh & Mook's 1:2
+  quadratically coupled oscillators, first-order multiple scales in closed form;
+* the one-mode case against the package's own one-mode harmonic balance.
+"""
+
+import json
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.optimize import fsolve
+
+from identification.analytical.harmonic import backbone
+from identification.effects import CATALOGUE, LINEAR_STIFFNESS, VISCOUS_DAMPING
+from identification.model import JointModel
+from identification.multimode import (
+    Coupling,
+    HarmonicSettings,
+    JointElement,
+    ModalModel,
+    Mode,
+    forced_response,
+    nonlinear_modes,
+    phase_resonance,
+)
+from identification.multimode.continuation import continue_nonlinear_mode
+
+CUBIC = CATALOGUE["cubic_stiffness"].name
+QUADRATIC = CATALOGUE["quadratic_stiffness"].name
+CUBIC_DAMPING = CATALOGUE["cubic_damping"].name
+JENKINS = next(e.name for e in CATALOGUE.values() if e.hysteretic)
+
+# The two-mode test system: f1 = 1 Hz, f2 = 2.45 Hz, a cubic joint element on
+# q = η1 + 0.6 η2 and the coupling potential V = κ η1² η2 (forces 2κ η1η2 on
+# mode 1, κ η1² on mode 2).
+F1, F2, SHAPE2, K3, KAPPA = 1.0, 2.45, 0.6, 300.0, 15.0
+GAMMA = (1.0, 0.5)
+
+
+def two_mode(zeta: float) -> ModalModel:
+    return ModalModel(
+        modes=(Mode(F1, zeta, GAMMA[0]), Mode(F2, zeta, GAMMA[1])),
+        joint_shapes=((1.0, SHAPE2),),
+        elements=(JointElement(CUBIC, K3),),
+        couplings=(Coupling(1, (1, 1), 2 * KAPPA), Coupling(2, (2, 0), KAPPA)),
+    )
+
+
+def two_mode_rhs(zeta: float, base):
+    """The two-mode equations written out by hand (base: t -> base acceleration)."""
+    w1, w2 = 2 * np.pi * F1, 2 * np.pi * F2
+
+    def rhs(t, s):
+        e1, e2, v1, v2 = s[:4]
+        q = e1 + SHAPE2 * e2
+        g = K3 * q**3
+        a = base(t)
+        d1 = -2 * zeta * w1 * v1 - w1**2 * e1 - g - 2 * KAPPA * e1 * e2 - GAMMA[0] * a
+        d2 = -2 * zeta * w2 * v2 - w2**2 * e2 - SHAPE2 * g - KAPPA * e1**2 - GAMMA[1] * a
+        return [v1, v2, d1, d2]
+
+    return rhs
+
+
+def fourier(samples: np.ndarray, harmonics: int) -> np.ndarray:
+    """[C0, C1, S1, …] of uniformly sampled whole periods (last axis)."""
+    spectrum = np.fft.rfft(samples, axis=-1) / samples.shape[-1]
+    out = [spectrum[..., 0].real]
+    for h in range(1, harmonics + 1):
+        out += [2 * spectrum[..., h].real, -2 * spectrum[..., h].imag]
+    return np.stack(out, axis=-1)
+
+
+def test_forced_steady_state_matches_time_integration():
+    zeta, level, f_exc = 0.05, 1.0, 0.9
+    sol = forced_response(two_mode(zeta), [f_exc], level, settings=HarmonicSettings(harmonics=9))
+    assert sol.converged[0]
+    omega = 2 * np.pi * f_exc
+    period = 1 / f_exc
+    n_per, n_last, n_periods = 128, 4, 60
+    t_end = n_periods * period
+    t_eval = t_end - n_last * period + np.arange(n_last * n_per) * period / n_per
+    run = solve_ivp(two_mode_rhs(zeta, lambda t: level * np.cos(omega * t)), (0, t_end),
+                    [0, 0, 0, 0], method="DOP853", rtol=1e-11, atol=1e-13, t_eval=t_eval)  # fmt: skip
+    assert run.success
+    # n_last whole periods: harmonic h of the period sits at bin n_last·h.
+    spectrum = np.fft.rfft(run.y[:2], axis=-1) / t_eval.size
+    for m in range(2):
+        integrated = 2 * abs(spectrum[m, n_last])
+        balanced = np.hypot(*sol.coefficients[0, m, 1:3])
+        assert balanced == pytest.approx(integrated, rel=1e-4)
+        # the phase too: the fundamental's cos and sin parts, relative to its amplitude
+        cos_sin = np.array([2 * spectrum[m, n_last].real, -2 * spectrum[m, n_last].imag])
+        assert np.max(np.abs(sol.coefficients[0, m, 1:3] - cos_sin)) <= 1e-4 * integrated
+        # the mean and second harmonic the quadratic coupling makes
+        mean = spectrum[m, 0].real
+        assert sol.coefficients[0, m, 0] == pytest.approx(mean, rel=1e-3, abs=1e-4 * integrated)
+
+
+def test_conservative_nonlinear_mode_matches_shooting():
+    """Zero damping: the EPMC point is the periodic orbit with the same fundamental amplitude.
+
+    The forces depend on positions only, so an orbit through zero velocity at t = 0
+    and again at T/2 is periodic with period T (time reversal). Shooting solves for
+    η(0) and T with the fundamental's cosine part of η1 over the period equal to
+    the prescribed amplitude (an integral carried by the integrator).
+    """
+    amplitude = 0.12
+    sol = nonlinear_modes(two_mode(0.0), [0.04, 0.08, amplitude],
+                          settings=HarmonicSettings(harmonics=11))  # fmt: skip
+    assert sol.converged.all()
+    assert np.max(np.abs(sol.damping_ratio)) < 1e-10
+    assert sol.frequency_hz[-1] > 1.01 * F1  # the cubic element hardens it
+    rhs = two_mode_rhs(0.0, lambda t: 0.0)
+
+    def conditions(unknowns):
+        e1, e2, period = unknowns
+
+        def augmented(t, s):
+            return [*rhs(t, s), s[0] * np.cos(2 * np.pi * t / period)]
+
+        end = solve_ivp(augmented, (0, period / 2), [e1, e2, 0, 0, 0], method="DOP853",
+                        rtol=1e-12, atol=1e-14).y[:, -1]  # fmt: skip
+        return [end[2], end[3], 4 * end[4] / period - amplitude]
+
+    c = sol.coefficients[-1]
+    start = c[:, 0] + c[:, 1::2].sum(axis=1)  # η(0) = C0 + Σ C_h
+    guess = [start[0], start[1], 1 / sol.frequency_hz[-1]]
+    e1, e2, period = fsolve(conditions, guess, xtol=1e-13)
+    assert np.max(np.abs(conditions([e1, e2, period]))) < 1e-10
+    assert sol.frequency_hz[-1] == pytest.approx(1 / period, rel=1e-4)
+    assert start[0] == pytest.approx(e1, rel=1e-4)
+    assert start[1] == pytest.approx(e2, rel=1e-4, abs=1e-4 * abs(e1))
+
+
+def _saturation_closed_form(w1, w2, mu1, mu2, alpha1, alpha2, force, big_omega):
+    """First-order multiple-scales steady state of Nayfeh & Mook's 1:2 system.
+
+    Nayfeh, A. H. and Mook, D. T. (1979), *Nonlinear Oscillations*, Wiley,
+    §6.5.1 "The saturation phenomenon": ü1 + ω1² u1 + 2μ1 u̇1 = α1 u1 u2,
+    ü2 + ω2² u2 + 2μ2 u̇2 = α2 u1² + F cos Ωt, with ω2 ≈ 2ω1 and Ω ≈ ω2. On the
+    coupled branch u2's amplitude is a2 = (2ω1/α1)·[4μ1² + (σ1 + σ2)²]^½, σ1 + σ2 =
+    Ω − 2ω1, whatever F (the saturation), and a1 solves the quadratic of the second
+    solvability condition. Returns (a1, a2, γ1, γ2): u1 = a1 cos(Ωt/2 − (γ1 + γ2)/2),
+    u2 = a2 cos(Ωt − γ2).
+    """
+    nu = (big_omega - 2 * w1) / 2
+    sigma2 = big_omega - w2
+    a2 = 4 * w1 * np.hypot(mu1, nu) / abs(alpha1)
+    e1 = 4 * w1 * (-nu + 1j * mu1) / (alpha1 * a2)
+    z = w2 * a2 * (-sigma2 + 1j * mu2)
+    w = alpha2 * w1 * (-nu - 1j * mu1) / (alpha1 * a2)
+    qa, qb, qc = abs(w) ** 2, -2 * np.real(z * np.conj(w)), abs(z) ** 2 - force**2 / 4
+    s = (-qb + np.sqrt(qb * qb - 4 * qa * qc)) / (2 * qa)
+    return np.sqrt(s), a2, np.angle(e1), np.angle((z - s * w) / (force / 2))
+
+
+@pytest.mark.parametrize("eps", [0.005, 0.0025])
+def test_nayfeh_mook_saturation(eps):
+    """Published 1:2 internal resonance: the saturation of the directly excited mode.
+
+    Mode 2 (ω2 = 2 + ε) is driven near its resonance (Ω = ω2 + ε/2) with μ1 = μ2 = ε,
+    α1 = α2 = 1, at 2 and 4 times the force where its linear response would reach
+    the saturation amplitude. First-order multiple scales leaves errors of order ε
+    relative (the next order): the balance must agree within 6ε on both amplitudes,
+    and halving ε must halve the error (checked across the two parameter rows).
+    """
+    w1, mu, alpha = 1.0, eps, 1.0
+    w2 = 2 + eps
+    big_omega = w2 + 0.5 * eps
+    model = ModalModel(
+        modes=(Mode(w1 / (2 * np.pi), mu / w1, 0.0), Mode(w2 / (2 * np.pi), mu / w2, 1.0)),
+        joint_shapes=(),
+        couplings=(Coupling(1, (1, 1), -alpha), Coupling(2, (2, 0), -alpha)),
+    )
+    saturation = 4 * w1 * np.hypot(mu, (big_omega - 2 * w1) / 2)
+    threshold = saturation * 2 * w2 * np.hypot(mu, big_omega - w2)
+    harmonics = 4
+    found = []
+    for factor in (2.0, 4.0):
+        force = factor * threshold
+        a1, a2, g1, g2 = _saturation_closed_form(w1, w2, mu, mu, alpha, alpha, force, big_omega)
+        start = np.zeros((2, 2 * harmonics + 1))
+        start[0, 1:3] = a1 * np.cos((g1 + g2) / 2), a1 * np.sin((g1 + g2) / 2)
+        start[1, 3:5] = a2 * np.cos(g2), a2 * np.sin(g2)
+        # u1 answers at Ω/2: the balance's fundamental is Ω/2, the forcing its 2nd harmonic;
+        # F cos Ωt on mode 2 alone is a base acceleration −F with participations (0, 1).
+        sol = forced_response(model, [big_omega / (2 * np.pi)], -force, forcing_harmonic=2,
+                              start=start, settings=HarmonicSettings(harmonics, tol=1e-12))  # fmt: skip
+        assert sol.converged[0]
+        c = sol.coefficients[0]
+        b1, b2 = np.hypot(*c[0, 1:3]), np.hypot(*c[1, 3:5])
+        assert b1 == pytest.approx(a1, rel=6 * eps)
+        assert b2 == pytest.approx(a2, rel=6 * eps)
+        found.append(b2)
+    # Saturation: doubling the force moves mode 2 by O(ε), not by a factor 2.
+    assert found[1] / found[0] - 1 < 4 * eps
+
+
+def test_saturation_error_is_first_order():
+    """The disagreement with the closed form falls like ε (the perturbation's next order)."""
+    errors = []
+    for eps in (0.01, 0.005, 0.0025):
+        w2 = 2 + eps
+        big_omega = w2 + 0.5 * eps
+        model = ModalModel(
+            modes=(Mode(1 / (2 * np.pi), eps, 0.0), Mode(w2 / (2 * np.pi), eps / w2, 1.0)),
+            joint_shapes=(),
+            couplings=(Coupling(1, (1, 1), -1.0), Coupling(2, (2, 0), -1.0)),
+        )
+        force = 2 * 4 * np.hypot(eps, (big_omega - 2) / 2) * 2 * w2 * np.hypot(eps, big_omega - w2)
+        a1, a2, g1, g2 = _saturation_closed_form(1.0, w2, eps, eps, 1.0, 1.0, force, big_omega)
+        start = np.zeros((2, 9))
+        start[0, 1:3] = a1 * np.cos((g1 + g2) / 2), a1 * np.sin((g1 + g2) / 2)
+        start[1, 3:5] = a2 * np.cos(g2), a2 * np.sin(g2)
+        sol = forced_response(model, [big_omega / (2 * np.pi)], -force, forcing_harmonic=2,
+                              start=start, settings=HarmonicSettings(4, tol=1e-12))  # fmt: skip
+        errors.append(abs(np.hypot(*sol.coefficients[0, 1, 3:5]) / a2 - 1))
+    ratios = np.array(errors[1:]) / np.array(errors[:-1])
+    assert np.all((ratios > 0.4) & (ratios < 0.6))
+
+
+def _joint_model() -> JointModel:
+    w0 = 2 * np.pi * 100
+    return JointModel({LINEAR_STIFFNESS: w0**2, VISCOUS_DAMPING: 2 * 0.003 * w0, CUBIC: 1e11,
+                       QUADRATIC: 3e6, CUBIC_DAMPING: 1e3})  # fmt: skip
+
+
+@pytest.mark.parametrize("with_jenkins", [False, True])
+def test_one_mode_equals_the_one_mode_balance(with_jenkins):
+    model = _joint_model()
+    n_time = 80
+    if with_jenkins:
+        k_t = 0.06 * model.linear_stiffness
+        model = model.with_effect(JENKINS, 1.0, k_t=k_t, F_s=k_t * 2e-4)
+        n_time = 160
+    a = np.linspace(0.05e-3, 2e-3, 7)
+    ref = backbone(model, a, method="multi", harmonics=5, n_time=n_time, tol=1e-13)
+    sol = phase_resonance(ModalModel.from_joint_model(model), a,
+                          settings=HarmonicSettings(5, n_time=n_time, tol=1e-13))  # fmt: skip
+    assert ref.converged.all() and sol.converged.all()
+    np.testing.assert_allclose(sol.frequency_hz, ref.frequency_hz, rtol=1e-10)
+    np.testing.assert_allclose(sol.base_acceleration[:, 1], ref.base_acceleration, rtol=1e-10)
+    np.testing.assert_allclose(sol.damping_ratio, ref.damping_ratio, rtol=1e-10)
+    c = sol.coefficients[:, 0]
+    scale = a[:, None]
+    np.testing.assert_allclose(c[:, :1] / scale, ref.harmonics_cos_m[:, :1] / scale, atol=1e-10)
+    np.testing.assert_allclose(c[:, 3::2] / scale, ref.harmonics_cos_m[:, 2:] / scale, atol=1e-10)
+    np.testing.assert_allclose(c[:, 4::2] / scale, ref.harmonics_sin_m[:, 2:] / scale, atol=1e-10)
+
+
+def test_internal_resonance_1_3_is_found_and_placed():
+    """A hardening mode 1 meets mode 2 at 3:1; the branch names mode 2, harmonic 3.
+
+    The joint element couples the modes; where 3 f(a) crosses f2 = 3.15 Hz mode 2
+    takes energy through the third harmonic. Without mode 2 at the joint (shape 0)
+    nothing is reported.
+    """
+    def model(shape2: float) -> ModalModel:
+        return ModalModel(modes=(Mode(1.0, 0.01), Mode(3.15, 0.01)),
+                          joint_shapes=((1.0, shape2),), elements=(JointElement(CUBIC, 40.0),))  # fmt: skip
+
+    branch = continue_nonlinear_mode(model(0.5), 0.01, 0.5, settings=HarmonicSettings(7))
+    assert branch.stopped == "end amplitude"
+    (found,) = branch.internal_resonances
+    assert (found.mode, found.harmonic) == (2, 3)
+    peak = np.argmax(branch.energy_share[:, 1])
+    assert 3 * branch.frequency_hz[peak] == pytest.approx(3.15, rel=0.02)
+    assert branch.amplitude_m[0] < found.amplitude_m < branch.amplitude_m[peak] + 1e-12
+    assert "1:3" in found.describe()
+    alone = continue_nonlinear_mode(model(0.0), 0.01, 0.5, settings=HarmonicSettings(7))
+    assert alone.internal_resonances == ()
+    assert alone.energy_share[:, 1].max() < 1e-20
+
+
+def test_batch_equals_single_sets():
+    model = two_mode(0.02)
+    names = ["mode1.frequency_hz", f"joint1.{CUBIC}", "coupling2"]
+    values = np.array([[1.0, 300.0, 15.0], [1.1, 200.0, 5.0], [0.95, 350.0, 25.0]])
+    a = np.array([0.02, 0.06, 0.1])
+    batch = nonlinear_modes(model, a, parameters=values, names=names)
+    for row, v in enumerate(values):
+        single = ModalModel(
+            modes=(Mode(v[0], 0.02, GAMMA[0]), Mode(F2, 0.02, GAMMA[1])),
+            joint_shapes=((1.0, SHAPE2),), elements=(JointElement(CUBIC, v[1]),),
+            couplings=(Coupling(1, (1, 1), 2 * KAPPA), Coupling(2, (2, 0), v[2])),
+        )  # fmt: skip
+        alone = nonlinear_modes(single, a)
+        np.testing.assert_allclose(batch.frequency_hz[row], alone.frequency_hz, rtol=1e-12)
+        np.testing.assert_allclose(batch.damping_ratio[row], alone.damping_ratio, rtol=1e-8)
+
+
+def test_json_round_trip_and_validation(tmp_path):
+    model = two_mode(0.02)
+    path = model.to_json(tmp_path / "m.json")
+    assert ModalModel.from_json(path) == model
+    data = json.loads(path.read_text())
+    assert (data["format"], data["version"]) == ("pm-joint/ModalModel", 1)
+    data["modes"][0]["frequency_hz"] = 2.0
+    with pytest.raises(ValueError, match="hash mismatch"):
+        ModalModel.from_dict(data)
+    del data["content_sha256"]
+    assert ModalModel.from_dict(data).modes[0].frequency_hz == 2.0
+    data["elements"][0]["effect"] = "no_such_effect"
+    with pytest.raises(ValueError, match="unknown effect"):
+        ModalModel.from_dict(data)
+    with pytest.raises(ValueError, match="degree"):
+        Coupling(1, (1, 0), 1.0)
+    with pytest.raises(ValueError, match="one entry per mode"):
+        ModalModel(modes=(Mode(1.0),), joint_shapes=((1.0, 0.5),))
+    with pytest.raises(ValueError, match="joint 2"):
+        ModalModel(modes=(Mode(1.0),), joint_shapes=((1.0,),),
+                   elements=(JointElement(CUBIC, 1.0, joint=2),))  # fmt: skip
+    with pytest.raises(ValueError, match="modes are 1..1"):
+        ModalModel(modes=(Mode(1.0),), joint_shapes=(), couplings=(Coupling(2, (2,), 1.0),))
+    with pytest.raises(ValueError, match="no base participation"):
+        phase_resonance(ModalModel(modes=(Mode(1.0, 0.01, 0.0),), joint_shapes=()), [0.1])
