@@ -86,8 +86,15 @@ def test_forced_steady_state_matches_time_integration():
     n_per, n_last, n_periods = 128, 4, 60
     t_end = n_periods * period
     t_eval = t_end - n_last * period + np.arange(n_last * n_per) * period / n_per
-    run = solve_ivp(two_mode_rhs(zeta, lambda t: level * np.cos(omega * t)), (0, t_end),
-                    [0, 0, 0, 0], method="DOP853", rtol=1e-11, atol=1e-13, t_eval=t_eval)  # fmt: skip
+    run = solve_ivp(
+        two_mode_rhs(zeta, lambda t: level * np.cos(omega * t)),
+        (0, t_end),
+        [0, 0, 0, 0],
+        method="DOP853",
+        rtol=1e-11,
+        atol=1e-13,
+        t_eval=t_eval,
+    )
     assert run.success
     # n_last whole periods: harmonic h of the period sits at bin n_last·h.
     spectrum = np.fft.rfft(run.y[:2], axis=-1) / t_eval.size
@@ -112,8 +119,9 @@ def test_conservative_nonlinear_mode_matches_shooting():
     the prescribed amplitude (an integral carried by the integrator).
     """
     amplitude = 0.12
-    sol = nonlinear_modes(two_mode(0.0), [0.04, 0.08, amplitude],
-                          settings=HarmonicSettings(harmonics=11))  # fmt: skip
+    sol = nonlinear_modes(
+        two_mode(0.0), [0.04, 0.08, amplitude], settings=HarmonicSettings(harmonics=11)
+    )
     assert sol.converged.all()
     assert np.max(np.abs(sol.damping_ratio)) < 1e-10
     assert sol.frequency_hz[-1] > 1.01 * F1  # the cubic element hardens it
@@ -125,8 +133,9 @@ def test_conservative_nonlinear_mode_matches_shooting():
         def augmented(t, s):
             return [*rhs(t, s), s[0] * np.cos(2 * np.pi * t / period)]
 
-        end = solve_ivp(augmented, (0, period / 2), [e1, e2, 0, 0, 0], method="DOP853",
-                        rtol=1e-12, atol=1e-14).y[:, -1]  # fmt: skip
+        end = solve_ivp(
+            augmented, (0, period / 2), [e1, e2, 0, 0, 0], method="DOP853", rtol=1e-12, atol=1e-14
+        ).y[:, -1]
         return [end[2], end[3], 4 * end[4] / period - amplitude]
 
     c = sol.coefficients[-1]
@@ -191,8 +200,14 @@ def test_nayfeh_mook_saturation(eps):
         start[1, 3:5] = a2 * np.cos(g2), a2 * np.sin(g2)
         # u1 answers at Ω/2: the balance's fundamental is Ω/2, the forcing its 2nd harmonic;
         # F cos Ωt on mode 2 alone is a base acceleration −F with participations (0, 1).
-        sol = forced_response(model, [big_omega / (2 * np.pi)], -force, forcing_harmonic=2,
-                              start=start, settings=HarmonicSettings(harmonics, tol=1e-12))  # fmt: skip
+        sol = forced_response(
+            model,
+            [big_omega / (2 * np.pi)],
+            -force,
+            forcing_harmonic=2,
+            start=start,
+            settings=HarmonicSettings(harmonics, tol=1e-12),
+        )
         assert sol.converged[0]
         c = sol.coefficients[0]
         b1, b2 = np.hypot(*c[0, 1:3]), np.hypot(*c[1, 3:5])
@@ -219,8 +234,14 @@ def test_saturation_error_is_first_order():
         start = np.zeros((2, 9))
         start[0, 1:3] = a1 * np.cos((g1 + g2) / 2), a1 * np.sin((g1 + g2) / 2)
         start[1, 3:5] = a2 * np.cos(g2), a2 * np.sin(g2)
-        sol = forced_response(model, [big_omega / (2 * np.pi)], -force, forcing_harmonic=2,
-                              start=start, settings=HarmonicSettings(4, tol=1e-12))  # fmt: skip
+        sol = forced_response(
+            model,
+            [big_omega / (2 * np.pi)],
+            -force,
+            forcing_harmonic=2,
+            start=start,
+            settings=HarmonicSettings(4, tol=1e-12),
+        )
         errors.append(abs(np.hypot(*sol.coefficients[0, 1, 3:5]) / a2 - 1))
     ratios = np.array(errors[1:]) / np.array(errors[:-1])
     assert np.all((ratios > 0.4) & (ratios < 0.6))
@@ -228,8 +249,15 @@ def test_saturation_error_is_first_order():
 
 def _joint_model() -> JointModel:
     w0 = 2 * np.pi * 100
-    return JointModel({LINEAR_STIFFNESS: w0**2, VISCOUS_DAMPING: 2 * 0.003 * w0, CUBIC: 1e11,
-                       QUADRATIC: 3e6, CUBIC_DAMPING: 1e3})  # fmt: skip
+    return JointModel(
+        {
+            LINEAR_STIFFNESS: w0**2,
+            VISCOUS_DAMPING: 2 * 0.003 * w0,
+            CUBIC: 1e11,
+            QUADRATIC: 3e6,
+            CUBIC_DAMPING: 1e3,
+        }
+    )
 
 
 @pytest.mark.parametrize("with_jenkins", [False, True])
@@ -242,8 +270,11 @@ def test_one_mode_equals_the_one_mode_balance(with_jenkins):
         n_time = 160
     a = np.linspace(0.05e-3, 2e-3, 7)
     ref = backbone(model, a, method="multi", harmonics=5, n_time=n_time, tol=1e-13)
-    sol = phase_resonance(ModalModel.from_joint_model(model), a,
-                          settings=HarmonicSettings(5, n_time=n_time, tol=1e-13))  # fmt: skip
+    sol = phase_resonance(
+        ModalModel.from_joint_model(model),
+        a,
+        settings=HarmonicSettings(5, n_time=n_time, tol=1e-13),
+    )
     assert ref.converged.all() and sol.converged.all()
     np.testing.assert_allclose(sol.frequency_hz, ref.frequency_hz, rtol=1e-10)
     np.testing.assert_allclose(sol.base_acceleration[:, 1], ref.base_acceleration, rtol=1e-10)
@@ -262,9 +293,13 @@ def test_internal_resonance_1_3_is_found_and_placed():
     takes energy through the third harmonic. Without mode 2 at the joint (shape 0)
     nothing is reported.
     """
+
     def model(shape2: float) -> ModalModel:
-        return ModalModel(modes=(Mode(1.0, 0.01), Mode(3.15, 0.01)),
-                          joint_shapes=((1.0, shape2),), elements=(JointElement(CUBIC, 40.0),))  # fmt: skip
+        return ModalModel(
+            modes=(Mode(1.0, 0.01), Mode(3.15, 0.01)),
+            joint_shapes=((1.0, shape2),),
+            elements=(JointElement(CUBIC, 40.0),),
+        )
 
     branch = continue_nonlinear_mode(model(0.5), 0.01, 0.5, settings=HarmonicSettings(7))
     assert branch.stopped == "end amplitude"
@@ -288,9 +323,10 @@ def test_batch_equals_single_sets():
     for row, v in enumerate(values):
         single = ModalModel(
             modes=(Mode(v[0], 0.02, GAMMA[0]), Mode(F2, 0.02, GAMMA[1])),
-            joint_shapes=((1.0, SHAPE2),), elements=(JointElement(CUBIC, v[1]),),
+            joint_shapes=((1.0, SHAPE2),),
+            elements=(JointElement(CUBIC, v[1]),),
             couplings=(Coupling(1, (1, 1), 2 * KAPPA), Coupling(2, (2, 0), v[2])),
-        )  # fmt: skip
+        )
         alone = nonlinear_modes(single, a)
         np.testing.assert_allclose(batch.frequency_hz[row], alone.frequency_hz, rtol=1e-12)
         np.testing.assert_allclose(batch.damping_ratio[row], alone.damping_ratio, rtol=1e-8)
@@ -315,9 +351,12 @@ def test_json_round_trip_and_validation(tmp_path):
     with pytest.raises(ValueError, match="one entry per mode"):
         ModalModel(modes=(Mode(1.0),), joint_shapes=((1.0, 0.5),))
     with pytest.raises(ValueError, match="joint 2"):
-        ModalModel(modes=(Mode(1.0),), joint_shapes=((1.0,),),
-                   elements=(JointElement(CUBIC, 1.0, joint=2),))  # fmt: skip
-    with pytest.raises(ValueError, match="modes are 1..1"):
+        ModalModel(
+            modes=(Mode(1.0),),
+            joint_shapes=((1.0,),),
+            elements=(JointElement(CUBIC, 1.0, joint=2),),
+        )
+    with pytest.raises(ValueError, match=r"modes are 1\.\.1"):
         ModalModel(modes=(Mode(1.0),), joint_shapes=(), couplings=(Coupling(2, (2,), 1.0),))
     with pytest.raises(ValueError, match="no base participation"):
         phase_resonance(ModalModel(modes=(Mode(1.0, 0.01, 0.0),), joint_shapes=()), [0.1])

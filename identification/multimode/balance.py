@@ -74,6 +74,10 @@ class HarmonicGrid:
         ``(2H+1, n_time)``: samples → coefficients (exact for harmonics ≤ H).
     derivative
         ``(2H+1, 2H+1)``: coefficients of ``dη/dθ`` from those of ``η``.
+    tangent_basis, tangent_basis_theta
+        ``(n_time, (2H+1)²)``: ``P_hn E_nk`` and ``P_hn ∂E_nk/∂θ`` per sample ``n``, so
+        that the projection ``P diag(g) E`` of per-sample tangents ``g`` is one
+        matrix product ``g · tangent_basis`` for a whole batch.
     """
 
     harmonics: int
@@ -83,6 +87,8 @@ class HarmonicGrid:
     basis_theta: np.ndarray
     projection: np.ndarray
     derivative: np.ndarray
+    tangent_basis: np.ndarray
+    tangent_basis_theta: np.ndarray
 
     @property
     def size(self) -> int:
@@ -114,8 +120,10 @@ def harmonic_grid(harmonics: int, n_time: int) -> HarmonicGrid:
     for h in range(1, harmonics + 1):
         derivative[2 * h - 1, 2 * h] = h  # cos hθ coefficient of dη/dθ is h·S_h
         derivative[2 * h, 2 * h - 1] = -h  # sin hθ coefficient is −h·C_h
+    tangent_basis = np.einsum("hn,nk->nhk", projection, basis).reshape(n_time, -1)
+    tangent_basis_theta = np.einsum("hn,nk->nhk", projection, basis_theta).reshape(n_time, -1)
     return HarmonicGrid(int(harmonics), int(n_time), orders, basis, basis_theta, projection,
-                        derivative)  # fmt: skip
+                        derivative, tangent_basis, tangent_basis_theta)  # fmt: skip
 
 
 def default_time_samples(model: ModalModel, harmonics: int) -> int:
@@ -246,9 +254,7 @@ def modal_arrays(
         participation=arrays["participation"],
         joint_shapes=arrays["joint_shapes"],
         element_coefficients=arrays["element_coefficients"].reshape(n_sets, len(model.elements)),
-        coupling_coefficients=arrays["coupling_coefficients"].reshape(
-            n_sets, len(model.couplings)
-        ),
+        coupling_coefficients=arrays["coupling_coefficients"].reshape(n_sets, len(model.couplings)),
         effects=tuple(get_effect(e.effect) for e in model.elements),
         element_joints=tuple(e.joint - 1 for e in model.elements),
         element_shapes=tuple(dict(e.shape) for e in model.elements),
@@ -345,15 +351,19 @@ def evaluate(
     residual[:, :, 2 * k] += arrays.participation * y[:, [layout.forcing_sin]]
 
     jacobian = np.zeros((n_sets, layout.n_coefficients, layout.n_state))
-    # ∂/∂Q: P · (diag(∂F/∂η) E + ω diag(∂F/∂η̇) E_θ), blocks (mode row, mode column).
-    samples = slope_x[..., None] * grid.basis + (omega[:, None, None, None] * slope_v)[
-        ..., None
-    ] * grid.basis_theta  # (B, N, N, T, K)
+    # ∂/∂Q: P (diag(∂F/∂η) E + ω diag(∂F/∂η̇) E_θ), blocks (mode row, mode column).
+    blocks = slope_x.reshape(-1, grid.n_time) @ grid.tangent_basis
+    blocks += (omega[:, None, None, None] * slope_v).reshape(
+        -1, grid.n_time
+    ) @ grid.tangent_basis_theta
+    blocks = blocks.reshape(n_sets, n_modes, n_modes, size, size)
     if history is not None:
-        samples = samples + history
-    blocks = grid.projection @ samples  # (B, N, N, K, K)
+        blocks += grid.projection @ history
     jq = blocks.transpose(0, 1, 3, 2, 4).reshape(n_sets, layout.n_coefficients, -1)
-    linear = stiffness[..., None] * np.eye(size) + (damping * omega[:, None])[:, :, None, None] * grid.derivative
+    linear = (
+        stiffness[..., None] * np.eye(size)
+        + (damping * omega[:, None])[:, :, None, None] * grid.derivative
+    )
     for m in range(n_modes):
         rows = slice(m * size, (m + 1) * size)
         jq[:, rows, rows] += linear[:, m]
@@ -402,19 +412,27 @@ def _nonlinear_forces(
             anchor = np.empty(x.shape, dtype=np.int64)
             _jenkins_steady(np.ascontiguousarray(x), k_t, f_s, g, anchor)
             gq = np.where(anchor != _SLIPPING, k_t, 0.0)
-            earlier = np.where((anchor >= 0)[..., None], -k_t * grid.basis[np.maximum(anchor, 0)], 0.0)
+            earlier = np.where(
+                (anchor >= 0)[..., None], -k_t * grid.basis[np.maximum(anchor, 0)], 0.0
+            )
             term = outer[..., None] * (c[:, :, None] * earlier)[:, None, None]
             history = term if history is None else history + term
         else:
             hx = _TANGENT_STEP * np.max(np.abs(x), axis=1, keepdims=True) + 1e-300
             hv = _TANGENT_STEP * np.max(np.abs(v), axis=1, keepdims=True) + 1e-300
             g = effect.feature(x, v, **shape)
-            gq = (effect.feature(x + hx, v, **shape) - effect.feature(x - hx, v, **shape)) / (2 * hx)
-            gv = (effect.feature(x, v + hv, **shape) - effect.feature(x, v - hv, **shape)) / (2 * hv)
+            gq = (effect.feature(x + hx, v, **shape) - effect.feature(x - hx, v, **shape)) / (
+                2 * hx
+            )
+            gv = (effect.feature(x, v + hv, **shape) - effect.feature(x, v - hv, **shape)) / (
+                2 * hv
+            )
             slope_v += outer * (c * gv)[:, None, None, :]
         force += phi[:, :, None] * (c * g)[:, None, :]
         slope_x += outer * (c * gq)[:, None, None, :]
-    for i, (m, powers) in enumerate(zip(arrays.coupling_modes, arrays.coupling_powers, strict=True)):
+    for i, (m, powers) in enumerate(
+        zip(arrays.coupling_modes, arrays.coupling_powers, strict=True)
+    ):
         c = arrays.coupling_coefficients[:, i, None]
         factors = [eta[:, k] ** p for k, p in enumerate(powers)]
         force[:, m] += c * np.prod(factors, axis=0)

@@ -139,8 +139,8 @@ def continue_nonlinear_mode(
     end_amplitude_m: float,
     *,
     mode: int = 1,
-    settings: HarmonicSettings = HarmonicSettings(),
-    continuation: ContinuationSettings = ContinuationSettings(),
+    settings: HarmonicSettings | None = None,
+    continuation: ContinuationSettings | None = None,
 ) -> ModeBranch:
     """Follow nonlinear mode ``mode`` from ``start_amplitude_m`` until ``end_amplitude_m``.
 
@@ -153,10 +153,13 @@ def continue_nonlinear_mode(
     mode
         The followed mode (from 1).
     settings
-        Harmonics and samples of the balance (``tol``/``max_iter`` of the first point).
+        Harmonics and samples of the balance (``tol``/``max_iter`` of the first point);
+        None: :class:`HarmonicSettings` defaults.
     continuation
-        Step control and the internal-resonance threshold.
+        Step control and the internal-resonance threshold; None: the defaults.
     """
+    settings = settings or HarmonicSettings()
+    continuation = continuation or ContinuationSettings()
     if not 0 < start_amplitude_m < end_amplitude_m:
         raise ValueError("amplitudes must satisfy 0 < start_amplitude_m < end_amplitude_m")
     first = nonlinear_modes(model, [start_amplitude_m], mode=mode, settings=settings)

@@ -377,24 +377,38 @@ class ModalModel:
                 raise ValueError(f"{source}: field {key!r} must be a list")
         try:
             modes = tuple(
-                Mode(**_fields(entry, ("frequency_hz", "damping_ratio", "participation"),
-                               f"{source}: modes[{i}]"))
+                Mode(
+                    **_fields(
+                        entry,
+                        ("frequency_hz", "damping_ratio", "participation"),
+                        f"{source}: modes[{i}]",
+                    )
+                )
                 for i, entry in enumerate(data["modes"])
-            )  # fmt: skip
+            )
             elements = tuple(
                 JointElement(
-                    **_fields(entry, ("effect", "coefficient", "shape", "joint"),
-                              f"{source}: elements[{i}]")
-                )  # fmt: skip
+                    **_fields(
+                        entry,
+                        ("effect", "coefficient", "shape", "joint"),
+                        f"{source}: elements[{i}]",
+                    )
+                )
                 for i, entry in enumerate(_list(data, "elements", source))
             )
             couplings = tuple(
-                Coupling(**_fields(entry, ("mode", "powers", "coefficient"),
-                                   f"{source}: couplings[{i}]"))
+                Coupling(
+                    **_fields(entry, ("mode", "powers", "coefficient"), f"{source}: couplings[{i}]")
+                )
                 for i, entry in enumerate(_list(data, "couplings", source))
-            )  # fmt: skip
-            model = cls(modes, tuple(tuple(r) for r in data["joint_shapes"]), elements,
-                        couplings, name=str(data.get("name", "")))  # fmt: skip
+            )
+            model = cls(
+                modes,
+                tuple(tuple(r) for r in data["joint_shapes"]),
+                elements,
+                couplings,
+                name=str(data.get("name", "")),
+            )
         except (TypeError, ValueError) as exc:
             if str(exc).startswith(source):
                 raise

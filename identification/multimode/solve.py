@@ -130,7 +130,9 @@ class ModalSolution:
     n_time: int
 
 
-def energy_shares(coefficients: np.ndarray, omega: np.ndarray, modal_omega: np.ndarray) -> np.ndarray:
+def energy_shares(
+    coefficients: np.ndarray, omega: np.ndarray, modal_omega: np.ndarray
+) -> np.ndarray:
     """Each mode's share of ``Σ_m E_m``, ``E_m = ⟨½ η̇_m² + ½ ω_m² η_m²⟩`` over a period.
 
     Parameters
@@ -202,7 +204,9 @@ def newton(
         if omega_column.size:
             omega = y[sets, layout.omega]
             d_omega = step[:, omega_column[0]]
-            shrink = np.where(d_omega < -0.5 * omega, -0.5 * omega / np.where(d_omega < 0, d_omega, -1.0), 1.0)
+            shrink = np.where(
+                d_omega < -0.5 * omega, -0.5 * omega / np.where(d_omega < 0, d_omega, -1.0), 1.0
+            )
             step *= shrink[:, None]
         y[np.ix_(sets[solved], free)] += step[solved]
     return y, converged
@@ -257,7 +261,9 @@ def _backbone_problem(
         [i for i in range(layout.n_coefficients) if i not in fundamental] + [layout.omega, unknown]
     )
     if unknown == layout.forcing_sin and np.any(arrays.participation[:, target] == 0):
-        raise ValueError(f"mode {mode} has no base participation: no phase-resonant forcing holds it")
+        raise ValueError(
+            f"mode {mode} has no base participation: no phase-resonant forcing holds it"
+        )
     n_sets = arrays.n_sets
     w_t = arrays.omega[:, target]
     # Linear start: the mode alone at its linear frequency, with its linear damping.
@@ -271,10 +277,20 @@ def _backbone_problem(
     out = np.full((n_sets, a.size, layout.n_state), np.nan)
     converged = np.zeros((n_sets, a.size), dtype=bool)
     previous_a = np.full(n_sets, a[0])
+    # The converged state before the last one, per set (NaN: none yet).
+    earlier = np.full_like(y, np.nan)
+    earlier_a = np.full(n_sets, np.nan)
     for i, amplitude in enumerate(a):
+        # Predictor: the secant through the last two solutions where there are two,
+        # else the last solution scaled to the new amplitude.
         start = y.copy()
-        # Predictor: the last solution scaled to the new amplitude.
         start[:, : layout.n_coefficients] *= (amplitude / previous_a)[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            secant = (
+                y + (y - earlier) * ((amplitude - previous_a) / (previous_a - earlier_a))[:, None]
+            )
+        has_secant = np.isfinite(secant).all(axis=1)
+        start[has_secant] = secant[has_secant]
         start[:, fundamental[0]] = amplitude
         start[:, fundamental[1]] = 0.0
         unknown_scale = np.ones((n_sets, free.size)) * amplitude
@@ -286,6 +302,9 @@ def _backbone_problem(
         )  # fmt: skip
         out[ok, i] = solved[ok]
         converged[:, i] = ok
+        earlier[ok] = y[ok]
+        earlier_a[ok] = previous_a[ok]
+        earlier_a[ok & (i == 0)] = np.nan
         y[ok] = solved[ok]
         previous_a[ok] = amplitude
     return _solution(problem, mode, arrays, grid, out, converged, a, parameters is None)
@@ -421,7 +440,10 @@ def forced_response(
     level = np.broadcast_to(np.asarray(base_acceleration_m_s2, dtype=float), frequency.shape)
     if not np.all(np.isfinite(level)) or np.any(level == 0):
         raise ValueError("base_acceleration_m_s2 must be finite and non-zero")
-    if not isinstance(forcing_harmonic, int | np.integer) or not 1 <= forcing_harmonic <= settings.harmonics:
+    if (
+        not isinstance(forcing_harmonic, int | np.integer)
+        or not 1 <= forcing_harmonic <= settings.harmonics
+    ):
         raise ValueError(
             f"forcing_harmonic must be an integer in 1..harmonics ({settings.harmonics}), "
             f"got {forcing_harmonic!r}"
@@ -434,7 +456,9 @@ def forced_response(
     if start is not None:
         start = np.asarray(start, dtype=float)
         if start.shape != (model.n_modes, grid.size):
-            raise ValueError(f"start must have shape ({model.n_modes}, {grid.size}), got {start.shape}")
+            raise ValueError(
+                f"start must have shape ({model.n_modes}, {grid.size}), got {start.shape}"
+            )
         y[:, : layout.n_coefficients] = start.ravel()
     free = np.arange(layout.n_coefficients)
     out = np.full((n_sets, frequency.size, layout.n_state), np.nan)
@@ -453,4 +477,6 @@ def forced_response(
         out[ok, i] = solved[ok]
         converged[:, i] = ok
         y[ok] = solved[ok]
-    return _solution("forced_response", None, arrays, grid, out, converged, None, parameters is None)
+    return _solution(
+        "forced_response", None, arrays, grid, out, converged, None, parameters is None
+    )
