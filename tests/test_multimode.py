@@ -360,3 +360,57 @@ def test_json_round_trip_and_validation(tmp_path):
         ModalModel(modes=(Mode(1.0),), joint_shapes=(), couplings=(Coupling(2, (2,), 1.0),))
     with pytest.raises(ValueError, match="no base participation"):
         phase_resonance(ModalModel(modes=(Mode(1.0, 0.01, 0.0),), joint_shapes=()), [0.1])
+
+
+def test_internal_resonance_1_2_captures_the_branch():
+    """Near 1:2 with the coupling potential κ η1² η2: mode 2 takes over the branch.
+
+    Mode 1 hardens (cubic element on q = η1) until twice its frequency meets
+    f2 = 2.1 Hz; from there the branch's frequency locks at f2 / 2 while mode 2
+    takes nearly all the energy through the second harmonic.
+    """
+    model = ModalModel(
+        modes=(Mode(1.0, 0.005), Mode(2.1, 0.005)),
+        joint_shapes=((1.0, 0.0),),
+        elements=(JointElement(CUBIC, 40.0),),
+        couplings=(Coupling(1, (1, 1), 6.0), Coupling(2, (2, 0), 3.0)),
+    )
+    branch = continue_nonlinear_mode(model, 0.01, 0.6, settings=HarmonicSettings(4))
+    assert branch.stopped == "end amplitude"
+    (found,) = branch.internal_resonances
+    assert (found.mode, found.harmonic) == (2, 2)
+    assert 2 * found.frequency_hz == pytest.approx(2.1, rel=0.02)
+    assert found.peak_share > 0.9
+    assert 2 * branch.frequency_hz[-1] == pytest.approx(2.1, rel=0.005)
+
+
+def test_phase_resonance_matches_time_integration():
+    """The two-mode phase-resonant backbone: the base A sin ωt it finds holds η1 = a cos ωt.
+
+    Integrated at the balance's ω and A, the steady η1 must have the prescribed
+    fundamental amplitude and no sine part; a frequency off by δ would turn the
+    phase by about δ / (ζ ω), so the 1e-4 phase check also checks ω to ~ζ·1e-4.
+    """
+    zeta = 0.05
+    sol = phase_resonance(two_mode(zeta), [0.02, 0.06, 0.1], settings=HarmonicSettings(9))
+    assert sol.converged.all()
+    omega = 2 * np.pi * sol.frequency_hz[-1]
+    level = sol.base_acceleration[-1, 1]
+    period = 2 * np.pi / omega
+    n_per, n_last, n_periods = 128, 4, 60
+    t_end = n_periods * period
+    t_eval = t_end - n_last * period + np.arange(n_last * n_per) * period / n_per
+    run = solve_ivp(
+        two_mode_rhs(zeta, lambda t: level * np.sin(omega * t)),
+        (0, t_end),
+        [0, 0, 0, 0],
+        method="DOP853",
+        rtol=1e-11,
+        atol=1e-13,
+        t_eval=t_eval,
+    )
+    assert run.success
+    fundamental = 2 * np.fft.rfft(run.y[0])[n_last] / t_eval.size
+    # η1 = a cos ωt: amplitude a, no sine part (the 90° of phase resonance)
+    assert fundamental.real == pytest.approx(0.1, rel=1e-4)
+    assert abs(fundamental.imag) <= 1e-4 * 0.1

@@ -36,8 +36,8 @@ class ContinuationSettings:
     Attributes
     ----------
     step
-        First step, in units of the scaled unknowns (amplitude over the start
-        amplitude, frequency over the linear one).
+        First step, in units of the scaled unknowns (coefficients over the end
+        amplitude, ω and ξ over the linear ω of the mode).
     min_step, max_step
         Bounds of the adapted step; the continuation stops below ``min_step``.
     max_points
@@ -49,9 +49,9 @@ class ContinuationSettings:
         Energy share of another mode that flags an internal resonance.
     """
 
-    step: float = 0.05
-    min_step: float = 1e-6
-    max_step: float = 0.5
+    step: float = 0.01
+    min_step: float = 1e-7
+    max_step: float = 0.05
     max_points: int = 2000
     max_iter: int = 12
     tol: float = 1e-10
@@ -177,7 +177,7 @@ def continue_nonlinear_mode(
     )
     a_column = int(np.flatnonzero(free == amplitude_index)[0])
     w_t = float(arrays.omega[0, target])
-    scale = np.full(free.size, start_amplitude_m)
+    scale = np.full(free.size, float(end_amplitude_m))
     scale[-2:] = w_t
 
     y = np.zeros(layout.n_state)
