@@ -26,9 +26,9 @@ for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLA
 
 import json  # noqa: E402
 import sys  # noqa: E402
-import time  # noqa: E402
 
 import numpy as np  # noqa: E402
+from harmonic import median_time  # noqa: E402  bench/harmonic.py, beside this script
 
 from identification.analytical.harmonic import backbone  # noqa: E402
 from identification.effects import CATALOGUE, LINEAR_STIFFNESS, VISCOUS_DAMPING  # noqa: E402
@@ -71,15 +71,6 @@ def parameter_sets(model: ModalModel, n_sets: int) -> tuple[np.ndarray, list[str
     nominal = np.array([F1, F2, ZETA, ZETA, K3, 2 * KAPPA, KAPPA])
     rng = np.random.default_rng(0)
     return nominal * rng.uniform(0.9, 1.1, (n_sets, nominal.size)), names
-
-
-def median_time(run, repeats: int) -> tuple[float, object]:
-    times, result = [], None
-    for _ in range(repeats):
-        start = time.perf_counter()
-        result = run()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times)), result
 
 
 def main() -> None:
