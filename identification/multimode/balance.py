@@ -350,42 +350,48 @@ def evaluate(
     residual[:, :, 2 * k - 1] += arrays.participation * y[:, [layout.forcing_cos]]
     residual[:, :, 2 * k] += arrays.participation * y[:, [layout.forcing_sin]]
 
-    jacobian = np.zeros((n_sets, layout.n_coefficients, layout.n_state))
     # ∂/∂Q: P (diag(∂F/∂η) E + ω diag(∂F/∂η̇) E_θ), blocks (mode row, mode column).
     blocks = slope_x.reshape(-1, grid.n_time) @ grid.tangent_basis
-    blocks += (omega[:, None, None, None] * slope_v).reshape(
-        -1, grid.n_time
-    ) @ grid.tangent_basis_theta
+    if slope_v is not None:
+        blocks += (omega[:, None, None, None] * slope_v).reshape(-1, grid.n_time) @ (
+            grid.tangent_basis_theta
+        )
     blocks = blocks.reshape(n_sets, n_modes, n_modes, size, size)
     if history is not None:
         blocks += grid.projection @ history
-    jq = blocks.transpose(0, 1, 3, 2, 4).reshape(n_sets, layout.n_coefficients, -1)
     linear = (
         stiffness[..., None] * np.eye(size)
         + (damping * omega[:, None])[:, :, None, None] * grid.derivative
     )
     for m in range(n_modes):
-        rows = slice(m * size, (m + 1) * size)
-        jq[:, rows, rows] += linear[:, m]
-    jacobian[:, :, : layout.n_coefficients] = jq
-    # ∂/∂ω: the linear part's, and the velocity's through η̇ = ω ∂η/∂θ.
-    d_omega = -2.0 * grid.orders**2 * omega[:, None, None] * q_modal + damping[:, :, None] * rotated
-    d_omega += np.einsum("bmkt,bkt->bmt", slope_v, eta_theta) @ grid.projection.T
-    jacobian[:, :, layout.omega] = d_omega.reshape(n_sets, -1)
-    jacobian[:, :, layout.xi] = (-omega[:, None, None] * rotated).reshape(n_sets, -1)
-    d_forcing = np.zeros((n_sets, n_modes, size))
-    d_forcing[:, :, 2 * k - 1] = arrays.participation
-    jacobian[:, :, layout.forcing_cos] = d_forcing.reshape(n_sets, -1)
-    d_forcing = np.zeros((n_sets, n_modes, size))
-    d_forcing[:, :, 2 * k] = arrays.participation
-    jacobian[:, :, layout.forcing_sin] = d_forcing.reshape(n_sets, -1)
+        blocks[:, m, m] += linear[:, m]
+    # The last four columns: ∂/∂ω (the linear part's, and the velocity's through
+    # η̇ = ω ∂η/∂θ), ∂/∂ξ and ∂/∂A_c, ∂/∂A_s (the participations at harmonic k).
+    extra = np.zeros((n_sets, n_modes, size, 4))
+    extra[..., 0] = -2.0 * grid.orders**2 * omega[:, None, None] * q_modal
+    extra[..., 0] += damping[:, :, None] * rotated
+    if slope_v is not None:
+        extra[..., 0] += np.einsum("bmkt,bkt->bmt", slope_v, eta_theta) @ grid.projection.T
+    extra[..., 1] = -omega[:, None, None] * rotated
+    extra[:, :, 2 * k - 1, 2] = arrays.participation
+    extra[:, :, 2 * k, 3] = arrays.participation
+    n_rows = layout.n_coefficients
+    jacobian = np.concatenate(
+        [
+            blocks.transpose(0, 1, 3, 2, 4).reshape(n_sets, n_rows, n_rows),
+            extra.reshape(n_sets, n_rows, 4),
+        ],
+        axis=2,
+    )
     return residual.reshape(n_sets, -1), jacobian
 
 
 def _nonlinear_forces(
     arrays: ModalArrays, grid: HarmonicGrid, eta: np.ndarray, eta_dot: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
     """Modal forces ``(B, N, T)``, their tangents ``(B, N, N, T)`` and the history term.
+
+    The velocity tangent is None when no element depends on the velocity.
 
     The history term (None without hysteretic elements) is the ``(B, N, N, T, 2H+1)``
     part of the sample Jacobian through earlier samples: a Jenkins element sticking
@@ -394,11 +400,11 @@ def _nonlinear_forces(
     n_sets, n_modes, n_time = eta.shape
     force = np.zeros_like(eta)
     slope_x = np.zeros((n_sets, n_modes, n_modes, n_time))
-    slope_v = np.zeros_like(slope_x)
+    slope_v = None  # until an element depends on the velocity
     history = None
     shapes = arrays.joint_shapes  # (B, J, N)
-    q = np.einsum("bjn,bnt->bjt", shapes, eta)
-    q_dot = np.einsum("bjn,bnt->bjt", shapes, eta_dot)
+    q = shapes @ eta  # (B, J, T)
+    q_dot = shapes @ eta_dot
     for e, effect in enumerate(arrays.effects):
         j = arrays.element_joints[e]
         c = arrays.element_coefficients[:, e, None]
@@ -427,20 +433,30 @@ def _nonlinear_forces(
             gv = (effect.feature(x, v + hv, **shape) - effect.feature(x, v - hv, **shape)) / (
                 2 * hv
             )
-            slope_v += outer * (c * gv)[:, None, None, :]
+            if gv.any():  # stiffness effects do not depend on the velocity
+                slope_v = 0.0 if slope_v is None else slope_v
+                slope_v = slope_v + outer * (c * gv)[:, None, None, :]
         force += phi[:, :, None] * (c * g)[:, None, :]
         slope_x += outer * (c * gq)[:, None, None, :]
     for i, (m, powers) in enumerate(
         zip(arrays.coupling_modes, arrays.coupling_powers, strict=True)
     ):
         c = arrays.coupling_coefficients[:, i, None]
-        factors = [eta[:, k] ** p for k, p in enumerate(powers)]
-        force[:, m] += c * np.prod(factors, axis=0)
+        factors = {k: eta[:, k] ** p for k, p in enumerate(powers) if p}
+        force[:, m] += c * _product(factors.values())
         for k, p in enumerate(powers):
             if p:
-                rest = np.prod([f for n, f in enumerate(factors) if n != k], axis=0)
-                slope_x[:, m, k] += c * p * eta[:, k] ** (p - 1) * rest
+                rest = [f for n, f in factors.items() if n != k]
+                slope_x[:, m, k] += c * p * _product([eta[:, k] ** (p - 1), *rest])
     return force, slope_x, slope_v, history
+
+
+def _product(factors) -> np.ndarray | float:
+    """Product of arrays (1.0 for none)."""
+    total = 1.0
+    for factor in factors:
+        total = total * factor
+    return total
 
 
 #: ``anchor`` value of a slipping Jenkins sample (no stiffness there).

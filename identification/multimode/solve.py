@@ -204,10 +204,7 @@ def newton(
         if omega_column.size:
             omega = y[sets, layout.omega]
             d_omega = step[:, omega_column[0]]
-            shrink = np.where(
-                d_omega < -0.5 * omega, -0.5 * omega / np.where(d_omega < 0, d_omega, -1.0), 1.0
-            )
-            step *= shrink[:, None]
+            step *= np.minimum(1.0, 0.5 * omega / np.maximum(-d_omega, 1e-300))[:, None]
         y[np.ix_(sets[solved], free)] += step[solved]
     return y, converged
 
