@@ -29,6 +29,7 @@ from identification.multimode import (
     nonlinear_modes,
     phase_resonance,
 )
+from identification.multimode.balance import StateLayout, evaluate, harmonic_grid, modal_arrays
 from identification.multimode.continuation import continue_nonlinear_mode
 
 CUBIC = CATALOGUE["cubic_stiffness"].name
@@ -399,3 +400,65 @@ def test_phase_resonance_matches_time_integration():
     # η1 = a cos ωt: amplitude a, no sine part (the 90° of phase resonance)
     assert fundamental.real == pytest.approx(0.1, rel=1e-4)
     assert abs(fundamental.imag) <= 1e-4 * 0.1
+
+
+def test_jacobian_matches_finite_differences():
+    """The AFT Jacobian, every column (coefficients, ω, ξ, A_c, A_s), against central differences.
+
+    A model with a velocity term (cubic damping), a stiffness term, a Jenkins
+    element on a second joint coordinate and both couplings; a state where the
+    Jenkins element slips part of the period.
+    """
+    model = ModalModel(
+        modes=(Mode(1.0, 0.02, 1.0), Mode(2.3, 0.01, 0.4)),
+        joint_shapes=((1.0, 0.6), (0.5, -1.0)),
+        elements=(
+            JointElement(CUBIC, 300.0),
+            JointElement(CUBIC_DAMPING, 5.0),
+            JointElement(JENKINS, 1.0, {"k_t": 10.0, "F_s": 0.5}, joint=2),
+        ),
+        couplings=(Coupling(1, (1, 1), 30.0), Coupling(2, (2, 0), 15.0)),
+    )
+    grid = harmonic_grid(3, 64)
+    layout = StateLayout(2, grid.size)
+    rng = np.random.default_rng(3)
+    y = np.zeros((1, layout.n_state))
+    y[0, : layout.n_coefficients] = 0.1 * rng.standard_normal(layout.n_coefficients)
+    y[0, layout.omega], y[0, layout.xi] = 6.5, 0.3
+    y[0, layout.forcing_cos], y[0, layout.forcing_sin] = 0.7, -0.2
+    arrays = modal_arrays(model)
+    for harmonic in (1, 2):
+        _, jacobian = evaluate(arrays, grid, y, harmonic)
+        numeric = np.empty_like(jacobian[0])
+        for j in range(layout.n_state):
+            h = 1e-7 * max(1.0, abs(y[0, j]))
+            up, down = y.copy(), y.copy()
+            up[0, j] += h
+            down[0, j] -= h
+            numeric[:, j] = (evaluate(arrays, grid, up, harmonic)[0][0]
+                             - evaluate(arrays, grid, down, harmonic)[0][0]) / (2 * h)  # fmt: skip
+        scale = np.abs(numeric).max()
+        assert np.max(np.abs(jacobian[0] - numeric)) <= 1e-5 * scale
+
+
+def test_uncoupled_second_mode_leaves_the_first_as_alone():
+    """Mode 2 absent from the joint and uncoupled: mode 1's backbone is the one-mode one,
+    Jenkins history included, and mode 2 answers the base as a linear oscillator."""
+    k_t = 0.06 * _joint_model().linear_stiffness
+    joint = _joint_model().with_effect(JENKINS, 1.0, k_t=k_t, F_s=k_t * 2e-4)
+    alone = ModalModel.from_joint_model(joint)
+    pair = ModalModel(
+        modes=(*alone.modes, Mode(230.0, 0.01, 0.7)),
+        joint_shapes=((1.0, 0.0),),
+        elements=alone.elements,
+    )
+    a = np.array([0.1e-3, 0.5e-3, 1.5e-3])
+    settings = HarmonicSettings(5, n_time=160, tol=1e-13)
+    one = phase_resonance(alone, a, settings=settings)
+    two = phase_resonance(pair, a, settings=settings)
+    np.testing.assert_allclose(two.frequency_hz, one.frequency_hz, rtol=1e-10)
+    np.testing.assert_allclose(two.damping_ratio, one.damping_ratio, rtol=1e-10)
+    # mode 2 answers the base (participation 0.7) linearly, at the fundamental only
+    w2, w = 2 * np.pi * 230.0, 2 * np.pi * two.frequency_hz
+    expected = 0.7 * two.base_acceleration[:, 1] / np.abs(w2**2 - w**2 + 2j * 0.01 * w2 * w)
+    np.testing.assert_allclose(np.hypot(*two.coefficients[:, 1, 1:3].T), expected, rtol=1e-8)
