@@ -14,7 +14,7 @@ import json
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
-from scipy.optimize import fsolve
+from scipy.optimize import brentq, fsolve
 
 from identification.analytical.harmonic import backbone
 from identification.effects import CATALOGUE, LINEAR_STIFFNESS, VISCOUS_DAMPING
@@ -462,3 +462,57 @@ def test_uncoupled_second_mode_leaves_the_first_as_alone():
     w2, w = 2 * np.pi * 230.0, 2 * np.pi * two.frequency_hz
     expected = 0.7 * two.base_acceleration[:, 1] / np.abs(w2**2 - w**2 + 2j * 0.01 * w2 * w)
     np.testing.assert_allclose(np.hypot(*two.coefficients[:, 1, 1:3].T), expected, rtol=1e-8)
+
+
+def test_light_damping_nonlinear_mode_matches_a_free_decay():
+    """ζ = 0.2 %: the free decay from the EPMC orbit follows its frequency and damping.
+
+    The decay's instantaneous frequency (one period between successive maxima of
+    η1) at the cycle's fundamental amplitude matches the EPMC branch to 1e-4. The
+    energy the decay loses over that cycle (the system's energy, written here)
+    matches the EPMC damping's, ``ξ T Σ_m ⟨η̇_m²⟩ = 4π D Σ_m ⟨η̇_m²⟩``, to 0.5 % (the
+    amplitude falls by 2πζ ≈ 1.3 % over a cycle, and EPMC's error for light
+    damping is of order ζ relative). The amplitude's log decrement is not D here:
+    the hardening makes the energy grow faster than a².
+    """
+    zeta = 0.002
+    amplitudes = np.linspace(0.01, 0.14, 27)
+    sol = nonlinear_modes(two_mode(zeta), amplitudes, settings=HarmonicSettings(9))
+    assert sol.converged.all()
+    c, omega = sol.coefficients[-1], 2 * np.pi * sol.frequency_hz[-1]
+    orders = np.arange(1, 10)
+    start = c[:, 0] + c[:, 1::2].sum(axis=1)
+    speed = omega * (c[:, 2::2] * orders).sum(axis=1)
+    t_end = 42.0
+    run = solve_ivp(two_mode_rhs(zeta, lambda t: 0.0), (0, t_end), [*start, *speed],
+                    method="DOP853", rtol=1e-11, atol=1e-13, dense_output=True)  # fmt: skip
+    grid = np.linspace(0, t_end, int(t_end * 400))
+    v1 = run.sol(grid)[2]
+    crossings = np.flatnonzero((v1[:-1] > 0) & (v1[1:] <= 0))
+    maxima = np.array([brentq(lambda t: run.sol(t)[2], grid[i], grid[i + 1], xtol=1e-14)
+                       for i in crossings])  # fmt: skip
+    w1, w2 = 2 * np.pi * F1, 2 * np.pi * F2
+
+    def energy(t: float) -> float:
+        e1, e2, v1, v2 = run.sol(t)
+        q = e1 + SHAPE2 * e2
+        return (0.5 * (v1**2 + v2**2 + w1**2 * e1**2 + w2**2 * e2**2) + K3 * q**4 / 4
+                + KAPPA * e1**2 * e2)  # fmt: skip
+
+    # Σ_m ⟨η̇_m²⟩ along the branch: ½ Σ_h (hω)² (C² + S²)
+    power = sol.coefficients[:, :, 1::2] ** 2 + sol.coefficients[:, :, 2::2] ** 2
+    mean_square_speed = 0.5 * np.sum(
+        (2 * np.pi * sol.frequency_hz[:, None, None] * orders) ** 2 * power, axis=(1, 2)
+    )
+    for k in (0, 15, 30):
+        period = maxima[k + 1] - maxima[k]
+        phase = 2 * np.pi * np.arange(256) / 256
+        eta1 = run.sol(maxima[k] + phase * period / (2 * np.pi))[0]
+        amplitude = np.hypot(2 * np.mean(eta1 * np.cos(phase)), 2 * np.mean(eta1 * np.sin(phase)))
+        branch = np.interp(amplitude, sol.amplitude_m, sol.frequency_hz)
+        assert 1 / period == pytest.approx(branch, rel=1e-4)
+        lost = energy(maxima[k]) - energy(maxima[k + 1])
+        predicted = (
+            4 * np.pi * np.interp(amplitude, sol.amplitude_m, sol.damping_ratio * mean_square_speed)
+        )
+        assert lost == pytest.approx(predicted, rel=5e-3)
