@@ -229,6 +229,10 @@ def _solve(matrix: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 # The problems.
 
 
+#: Sub-steps tried, in turn, where a step along the amplitudes fails.
+_REFINEMENTS = (4, 16)
+
+
 def _mode_index(model: ModalModel, mode: int) -> int:
     if isinstance(mode, bool) or not isinstance(mode, int | np.integer):
         raise ValueError(f"mode must be an integer, got {mode!r}")
@@ -271,8 +275,22 @@ def _backbone_problem(
         y[:, layout.xi] = linear_damping
     else:
         y[:, layout.forcing_sin] = linear_damping * w_t / arrays.participation[:, target]
+
+    def solve_at(sets: np.ndarray, start: np.ndarray, amplitude: np.ndarray):
+        """Newton for the sets ``sets`` at their amplitudes, from ``start`` (updated)."""
+        start[:, fundamental[0]] = amplitude
+        start[:, fundamental[1]] = 0.0
+        unknown_scale = np.repeat(amplitude[:, None], free.size, axis=1)
+        unknown_scale[:, -2] = w_t[sets]
+        unknown_scale[:, -1] = w_t[sets] * (1.0 if unknown == layout.xi else w_t[sets] * amplitude)
+        return newton(
+            arrays.take(sets), grid, start, free, w_t[sets] ** 2 * amplitude, unknown_scale,
+            tol=settings.tol, max_iter=settings.max_iter,
+        )  # fmt: skip
+
     out = np.full((n_sets, a.size, layout.n_state), np.nan)
     converged = np.zeros((n_sets, a.size), dtype=bool)
+    every = np.arange(n_sets)
     previous_a = np.full(n_sets, a[0])
     # The converged state before the last one, per set (NaN: none yet).
     earlier = np.full_like(y, np.nan)
@@ -288,15 +306,24 @@ def _backbone_problem(
             )
         has_secant = np.isfinite(secant).all(axis=1)
         start[has_secant] = secant[has_secant]
-        start[:, fundamental[0]] = amplitude
-        start[:, fundamental[1]] = 0.0
-        unknown_scale = np.ones((n_sets, free.size)) * amplitude
-        unknown_scale[:, -2] = w_t
-        unknown_scale[:, -1] = w_t if unknown == layout.xi else w_t**2 * amplitude
-        solved, ok = newton(
-            arrays, grid, start, free, w_t**2 * amplitude, unknown_scale,
-            tol=settings.tol, max_iter=settings.max_iter,
-        )  # fmt: skip
+        solved, ok = solve_at(every, start, np.full(n_sets, amplitude))
+        # Where the step failed (a branch bending at an internal resonance), walk from
+        # the last solution in smaller steps.
+        retry = np.flatnonzero(~ok)
+        for pieces in _REFINEMENTS:
+            if retry.size == 0:
+                break
+            state, alive = y[retry].copy(), np.ones(retry.size, dtype=bool)
+            steps = previous_a[retry, None] + np.outer(amplitude - previous_a[retry],
+                                                       np.arange(pieces + 1) / pieces)  # fmt: skip
+            for j in range(1, pieces + 1):
+                live = np.flatnonzero(alive)
+                state[live, : layout.n_coefficients] *= (steps[live, j] / steps[live, j - 1])[
+                    :, None
+                ]
+                state[live], alive[live] = solve_at(retry[live], state[live], steps[live, j])
+            solved[retry[alive]], ok[retry[alive]] = state[alive], True
+            retry = retry[~alive]
         out[ok, i] = solved[ok]
         converged[:, i] = ok
         earlier[ok] = y[ok]
