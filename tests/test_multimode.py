@@ -330,6 +330,7 @@ def test_batch_equals_single_sets():
 
 def test_json_round_trip_and_validation(tmp_path):
     model = two_mode(0.02)
+    assert "η1·η2" in model.equation(1) and "at x = q1" in model.equation(2)
     path = model.to_json(tmp_path / "m.json")
     assert ModalModel.from_json(path) == model
     data = json.loads(path.read_text())

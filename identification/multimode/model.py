@@ -87,11 +87,6 @@ class Mode:
         object.__setattr__(self, "damping_ratio", zeta)
         object.__setattr__(self, "participation", _finite(self.participation, "participation"))
 
-    @property
-    def omega(self) -> float:
-        """Linear angular frequency ω = 2π f (rad/s)."""
-        return 2.0 * math.pi * self.frequency_hz
-
 
 @dataclass(frozen=True)
 class JointElement:
@@ -247,11 +242,6 @@ class ModalModel:
         return len(self.joint_shapes)
 
     @property
-    def hysteretic(self) -> bool:
-        """Whether an element's force depends on the loading history (Jenkins)."""
-        return any(get_effect(e.effect).hysteretic for e in self.elements)
-
-    @property
     def polynomial(self) -> bool:
         """Every force is a polynomial of degree ≤ 3 (the AFT is exact with few samples)."""
         return all(get_effect(e.effect).polynomial for e in self.elements)
@@ -275,13 +265,16 @@ class ModalModel:
 
     def equation(self, mode: int) -> str:
         """The equation of motion of ``mode`` (numbered from 1), in words and symbols."""
+        if not 1 <= mode <= self.n_modes:
+            raise ValueError(f"mode must be 1..{self.n_modes}, got {mode}")
         m = mode - 1
         spec = self.modes[m]
         parts = [f"η{mode}'' + 2·{spec.damping_ratio:.4g}·ω{mode}·η{mode}' + ω{mode}²·η{mode}"]
         for element in self.elements:
             weight = self.joint_shapes[element.joint - 1][m]
             if weight != 0.0:
-                term = get_effect(element.effect).term.replace("x", f"q{element.joint}")
+                # The catalogue's term in x, ẋ, read at the joint coordinate q_j.
+                term = f"{get_effect(element.effect).term} at x = q{element.joint}"
                 parts.append(f"{weight:.4g}·{element.coefficient:.4g}·[{term}]")
         for coupling in self.couplings:
             if coupling.mode == mode:
