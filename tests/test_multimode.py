@@ -147,13 +147,14 @@ def test_conservative_nonlinear_mode_matches_shooting():
 def _saturation_closed_form(w1, w2, mu1, mu2, alpha1, alpha2, force, big_omega):
     """First-order multiple-scales steady state of Nayfeh & Mook's 1:2 system.
 
-    Nayfeh, A. H. and Mook, D. T. (1979), *Nonlinear Oscillations*, Wiley,
-    §6.5.1 "The saturation phenomenon": ü1 + ω1² u1 + 2μ1 u̇1 = α1 u1 u2,
-    ü2 + ω2² u2 + 2μ2 u̇2 = α2 u1² + F cos Ωt, with ω2 ≈ 2ω1 and Ω ≈ ω2. On the
-    coupled branch u2's amplitude is a2 = (2ω1/α1)·[4μ1² + (σ1 + σ2)²]^½, σ1 + σ2 =
-    Ω − 2ω1, whatever F (the saturation), and a1 solves the quadratic of the second
-    solvability condition. Returns (a1, a2, γ1, γ2): u1 = a1 cos(Ωt/2 − (γ1 + γ2)/2),
-    u2 = a2 cos(Ωt − γ2).
+    Nayfeh, A. H. and Mook, D. T. (1979; Wiley Classics 1995), *Nonlinear
+    Oscillations*, Wiley, §6.5 (quadratic nonlinearities, 1:2 internal resonance)
+    and §6.5.1 "The saturation phenomenon": ü1 + ω1² u1 + 2μ1 u̇1 = α1 u1 u2,
+    ü2 + ω2² u2 + 2μ2 u̇2 = α2 u1² + F cos Ωt, with ω2 = 2ω1 + σ1 and Ω = ω2 + σ2
+    (the book's ε absorbed into μ, σ, F). On the coupled branch u2's amplitude is
+    a2 = (2ω1/α1)·[4μ1² + (σ1 + σ2)²]^½ whatever F (the saturation), and a1² solves
+    the quadratic the second solvability condition gives. Returns (a1, a2, γ1, γ2):
+    u1 = a1 cos(Ωt/2 − (γ1 + γ2)/2), u2 = a2 cos(Ωt − γ2).
     """
     nu = (big_omega - 2 * w1) / 2
     sigma2 = big_omega - w2
@@ -166,17 +167,15 @@ def _saturation_closed_form(w1, w2, mu1, mu2, alpha1, alpha2, force, big_omega):
     return np.sqrt(s), a2, np.angle(e1), np.angle((z - s * w) / (force / 2))
 
 
-@pytest.mark.parametrize("eps", [0.005, 0.0025])
-def test_nayfeh_mook_saturation(eps):
-    """Published 1:2 internal resonance: the saturation of the directly excited mode.
+def _saturation_case(eps: float, factor: float) -> tuple[np.ndarray, np.ndarray]:
+    """Balanced and closed-form amplitudes ``(a1, a2)`` of the 1:2 case at ``eps``.
 
-    Mode 2 (ω2 = 2 + ε) is driven near its resonance (Ω = ω2 + ε/2) with μ1 = μ2 = ε,
-    α1 = α2 = 1, at 2 and 4 times the force where its linear response would reach
-    the saturation amplitude. First-order multiple scales leaves errors of order ε
-    relative (the next order): the balance must agree within 6ε on both amplitudes,
-    and halving ε must halve the error (checked across the two parameter rows).
+    Mode 2 (ω2 = 2 + ε) is driven near its resonance (Ω = ω2 + ε/2) with
+    μ1 = μ2 = ε, α1 = α2 = 1, at ``factor`` times the force where its linear
+    response would reach the saturation amplitude. Newton starts from the closed
+    form (the uncoupled branch a1 = 0 is a solution too).
     """
-    w1, mu, alpha = 1.0, eps, 1.0
+    w1, mu, alpha, harmonics = 1.0, eps, 1.0, 4
     w2 = 2 + eps
     big_omega = w2 + 0.5 * eps
     model = ModalModel(
@@ -185,60 +184,41 @@ def test_nayfeh_mook_saturation(eps):
         couplings=(Coupling(1, (1, 1), -alpha), Coupling(2, (2, 0), -alpha)),
     )
     saturation = 4 * w1 * np.hypot(mu, (big_omega - 2 * w1) / 2)
-    threshold = saturation * 2 * w2 * np.hypot(mu, big_omega - w2)
-    harmonics = 4
-    found = []
-    for factor in (2.0, 4.0):
-        force = factor * threshold
-        a1, a2, g1, g2 = _saturation_closed_form(w1, w2, mu, mu, alpha, alpha, force, big_omega)
-        start = np.zeros((2, 2 * harmonics + 1))
-        start[0, 1:3] = a1 * np.cos((g1 + g2) / 2), a1 * np.sin((g1 + g2) / 2)
-        start[1, 3:5] = a2 * np.cos(g2), a2 * np.sin(g2)
-        # u1 answers at Ω/2: the balance's fundamental is Ω/2, the forcing its 2nd harmonic;
-        # F cos Ωt on mode 2 alone is a base acceleration −F with participations (0, 1).
-        sol = forced_response(
-            model,
-            [big_omega / (2 * np.pi)],
-            -force,
-            forcing_harmonic=2,
-            start=start,
-            settings=HarmonicSettings(harmonics, tol=1e-12),
-        )
-        assert sol.converged[0]
-        c = sol.coefficients[0]
-        b1, b2 = np.hypot(*c[0, 1:3]), np.hypot(*c[1, 3:5])
-        assert b1 == pytest.approx(a1, rel=6 * eps)
-        assert b2 == pytest.approx(a2, rel=6 * eps)
-        found.append(b2)
-    # Saturation: doubling the force moves mode 2 by O(ε), not by a factor 2.
-    assert found[1] / found[0] - 1 < 4 * eps
+    force = factor * saturation * 2 * w2 * np.hypot(mu, big_omega - w2)
+    a1, a2, g1, g2 = _saturation_closed_form(w1, w2, mu, mu, alpha, alpha, force, big_omega)
+    start = np.zeros((2, 2 * harmonics + 1))
+    start[0, 1:3] = a1 * np.cos((g1 + g2) / 2), a1 * np.sin((g1 + g2) / 2)
+    start[1, 3:5] = a2 * np.cos(g2), a2 * np.sin(g2)
+    # u1 answers at Ω/2: the balance's fundamental is Ω/2, the forcing its 2nd harmonic;
+    # F cos Ωt on mode 2 alone is a base acceleration −F with participations (0, 1).
+    sol = forced_response(model, [big_omega / (2 * np.pi)], -force, forcing_harmonic=2,
+                          start=start, settings=HarmonicSettings(harmonics, tol=1e-12))  # fmt: skip
+    assert sol.converged[0]
+    c = sol.coefficients[0]
+    return np.array([np.hypot(*c[0, 1:3]), np.hypot(*c[1, 3:5])]), np.array([a1, a2])
+
+
+@pytest.mark.parametrize("eps", [0.005, 0.0025])
+def test_nayfeh_mook_saturation(eps):
+    """Published 1:2 internal resonance: the saturation of the directly excited mode.
+
+    At 2 and 4 times the saturation force, first-order multiple scales leaves
+    errors of order ε relative (the next order): the balance must agree within 6ε
+    on both amplitudes; and doubling the force moves mode 2 by O(ε), not by a
+    factor 2 (the saturation).
+    """
+    balanced, closed = zip(*(_saturation_case(eps, factor) for factor in (2.0, 4.0)), strict=True)
+    for b, c in zip(balanced, closed, strict=True):
+        np.testing.assert_allclose(b, c, rtol=6 * eps)
+    assert balanced[1][1] / balanced[0][1] - 1 < 4 * eps
 
 
 def test_saturation_error_is_first_order():
     """The disagreement with the closed form falls like ε (the perturbation's next order)."""
     errors = []
     for eps in (0.01, 0.005, 0.0025):
-        w2 = 2 + eps
-        big_omega = w2 + 0.5 * eps
-        model = ModalModel(
-            modes=(Mode(1 / (2 * np.pi), eps, 0.0), Mode(w2 / (2 * np.pi), eps / w2, 1.0)),
-            joint_shapes=(),
-            couplings=(Coupling(1, (1, 1), -1.0), Coupling(2, (2, 0), -1.0)),
-        )
-        force = 2 * 4 * np.hypot(eps, (big_omega - 2) / 2) * 2 * w2 * np.hypot(eps, big_omega - w2)
-        a1, a2, g1, g2 = _saturation_closed_form(1.0, w2, eps, eps, 1.0, 1.0, force, big_omega)
-        start = np.zeros((2, 9))
-        start[0, 1:3] = a1 * np.cos((g1 + g2) / 2), a1 * np.sin((g1 + g2) / 2)
-        start[1, 3:5] = a2 * np.cos(g2), a2 * np.sin(g2)
-        sol = forced_response(
-            model,
-            [big_omega / (2 * np.pi)],
-            -force,
-            forcing_harmonic=2,
-            start=start,
-            settings=HarmonicSettings(4, tol=1e-12),
-        )
-        errors.append(abs(np.hypot(*sol.coefficients[0, 1, 3:5]) / a2 - 1))
+        balanced, closed = _saturation_case(eps, 2.0)
+        errors.append(abs(balanced[1] / closed[1] - 1))
     ratios = np.array(errors[1:]) / np.array(errors[:-1])
     assert np.all((ratios > 0.4) & (ratios < 0.6))
 
