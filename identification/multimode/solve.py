@@ -13,11 +13,15 @@ differ in which entries of the state ``y = [Q, ω, ξ, A_c, A_s]`` are unknown:
     mode this is the backbone of :func:`identification.analytical.harmonic.backbone`
     (``method="multi"``), and its damping ratio ``Γ A / (2 ω² a)`` the power balance.
 ``nonlinear_modes``
-    Nonlinear modes by the extended periodic motion concept (Krack 2015): no
-    excitation, a negative viscous term ``−ξ η̇`` on every mode makes the damped
-    motion periodic; the mode's fundamental is prescribed as ``a cos θ`` (which also
-    fixes the phase), ``ω`` and ``ξ`` are unknown, and ``ξ / (2ω)`` is the modal
-    damping ratio.
+    Nonlinear modes by the extended periodic motion concept (Krack, M. 2015,
+    "Nonlinear modal analysis of nonconservative systems: extension of the periodic
+    motion concept", Computers & Structures 154, 59–71): no excitation, a negative
+    viscous term ``−ξ η̇`` on every (unit-mass) mode makes the damped motion
+    periodic; the mode's fundamental is prescribed as ``a cos θ`` (its amplitude
+    sets the point on the branch, its zero sine part the phase), ``ω`` and ``ξ``
+    are unknown, and ``ξ / (2ω)`` is the modal damping ratio. (NLvib prescribes a
+    mass-weighted norm of the whole fundamental instead; prescribing one mode's
+    fundamental keeps the amplitude a measurable modal amplitude.)
 
 Newton's method runs batched over parameter sets with the Jacobian of
 :func:`~identification.multimode.balance.evaluate`, unknowns scaled by their
