@@ -497,3 +497,28 @@ def test_light_damping_nonlinear_mode_matches_a_free_decay():
             4 * np.pi * np.interp(amplitude, sol.amplitude_m, sol.damping_ratio * mean_square_speed)
         )
         assert lost == pytest.approx(predicted, rel=5e-3)
+
+
+def _scenario_terms(effect, k0: float) -> dict:
+    truth = effect.hidden_scenario.truth(k0)
+    return dict(truth) if isinstance(truth, dict) else {"coefficient": truth}
+
+
+@pytest.mark.parametrize(
+    "effect", [e for e in CATALOGUE.values() if e.hidden_scenario is not None], ids=lambda e: e.name
+)
+def test_every_catalogue_effect_is_a_joint_element(effect):
+    """Each catalogue effect as the joint element of a one-mode model (at its lab scenario's
+    size) gives the one-mode balance's backbone to 1e-9."""
+    w0 = 2 * np.pi * 100
+    entry = _scenario_terms(effect, w0**2)
+    model = JointModel({LINEAR_STIFFNESS: w0**2, VISCOUS_DAMPING: 2 * 0.003 * w0,
+                        effect.name: entry})  # fmt: skip
+    a = np.array([0.1e-3, 0.6e-3, 1.5e-3])
+    ref = backbone(model, a, method="multi", harmonics=3, n_time=128, tol=1e-13)
+    sol = phase_resonance(ModalModel.from_joint_model(model), a,
+                          settings=HarmonicSettings(3, n_time=128, tol=1e-13))  # fmt: skip
+    both = ref.converged & sol.converged
+    assert both.sum() >= 2
+    np.testing.assert_allclose(sol.frequency_hz[both], ref.frequency_hz[both], rtol=1e-9)
+    np.testing.assert_allclose(sol.damping_ratio[both], ref.damping_ratio[both], rtol=1e-9)
