@@ -177,9 +177,9 @@ def channel_errors(
             }  # fmt: skip
             continue
         error = np.where(used, p - t, 0.0)
-        n_per_level = used.sum(axis=0)
+        n_per_point = used.sum(axis=0)
         with np.errstate(invalid="ignore", divide="ignore"):
-            per_level = np.sqrt((error**2).sum(axis=0) / n_per_level)
+            rmse_per_point = np.sqrt((error**2).sum(axis=0) / n_per_point)
             relative = np.abs(error[used] / t[used])
         finite = np.isfinite(relative)
         out[name] = {
@@ -187,8 +187,8 @@ def channel_errors(
             "mae": _json_float(np.mean(np.abs(error[used]))) if used.any() else None,
             "max_abs": _json_float(np.max(np.abs(error[used]))) if used.any() else None,
             "mape_pct": _json_float(100 * relative[finite].mean()) if finite.any() else None,
-            "rmse_per_level": [_json_float(v) for v in per_level],
-            "n_per_level": n_per_level.tolist(),
+            "rmse_per_level": [_json_float(v) for v in rmse_per_point],
+            "n_per_level": n_per_point.tolist(),
             "n_entries": int(used.sum()),
         }
     return out
@@ -210,11 +210,11 @@ def _ratios(
         if scatter is not None and name in scatter:
             spread = np.asarray(scatter[name], dtype=float)
             for model in ("surrogate", *REGRESSION_BASELINES):
-                per_level = np.array(
+                rmse_per_point = np.array(
                     [np.nan if v is None else v for v in models[model][name]["rmse_per_level"]]
                 )
                 with np.errstate(invalid="ignore", divide="ignore"):
-                    ratio = per_level / spread
+                    ratio = rmse_per_point / spread
                 known = np.isfinite(ratio)
                 prefix = "" if model == "surrogate" else f"{model}_"
                 entry[f"{prefix}to_scatter_per_level"] = [_json_float(v) for v in ratio]
@@ -337,23 +337,26 @@ def amplitudes_at_levels(
     On each curve the amplitudes a test stepping its level up holds are those
     with a backbone (mask ≥ 0.5) whose base acceleration exceeds every earlier
     one; the amplitude at a level is interpolated linearly in ``log a`` against
-    ``log A`` between them. ``(n, n_levels)``; NaN where a level is below or
-    above what the curve holds.
+    ``log A`` between them. ``(n, len(levels_m_s2))``; NaN where a level is below
+    or above what the curve holds.
     """
     if spec.representation != "amplitude_grid":
         raise ValueError("amplitudes_at_levels needs an amplitude-grid backbone")
-    levels = np.log(np.asarray(levels_m_s2, dtype=float))
-    level = backbones[..., spec.channel_index("base_acceleration_m_s2")]
+    log_excitation = np.log(np.asarray(levels_m_s2, dtype=float))
+    # The base acceleration (m/s²) each curve needs at each grid amplitude.
+    needed_m_s2 = backbones[..., spec.channel_index("base_acceleration_m_s2")]
     exists = backbones[..., spec.channel_index(MASK_CHANNEL)] >= 0.5
     log_grid = np.log(spec.amplitudes_m)
-    out = np.full((backbones.shape[0], levels.size), np.nan)
-    for row, (a_levels, held) in enumerate(zip(level, exists & (level > 0), strict=True)):
-        candidates = np.where(held, a_levels, -np.inf)
+    out = np.full((backbones.shape[0], log_excitation.size), np.nan)
+    for row, (curve_m_s2, held) in enumerate(
+        zip(needed_m_s2, exists & (needed_m_s2 > 0), strict=True)
+    ):
+        candidates = np.where(held, curve_m_s2, -np.inf)
         before = np.concatenate([[-np.inf], np.maximum.accumulate(candidates)[:-1]])
-        keep = held & (a_levels > before)
+        keep = held & (curve_m_s2 > before)
         if keep.sum() >= 2:
             out[row] = np.interp(
-                levels, np.log(a_levels[keep]), log_grid[keep], left=np.nan, right=np.nan
+                log_excitation, np.log(curve_m_s2[keep]), log_grid[keep], left=np.nan, right=np.nan
             )
     return np.exp(out)
 
@@ -376,7 +379,8 @@ def table5_figures(
     Returns
     -------
     dict
-        ``representation`` (how the figure was made), ``n_levels``, and per
+        ``representation`` (how the figure was made), ``levels_m_s2`` (the
+        excitation levels compared at, m/s²), and per
         predictor ``mse_amplitude_mm2``, ``mae_amplitude_mm``, ``mape_amplitude_pct``,
         ``n_pairs`` and ``n_pairs_undefined``.
     """
@@ -385,21 +389,23 @@ def table5_figures(
             return {"representation": spec.representation, "amplitude": None}
         true_amplitude = truth[..., spec.channel_index("amplitude_m")]
         amplitude = {k: p[..., spec.channel_index("amplitude_m")] for k, p in predictions.items()}
-        levels = spec.levels
+        excitation_m_s2 = spec.levels
     else:
         if levels_m_s2 is None:
-            level = truth[..., spec.channel_index("base_acceleration_m_s2")]
+            needed_m_s2 = truth[..., spec.channel_index("base_acceleration_m_s2")]
             exists = truth[..., spec.channel_index(MASK_CHANNEL)] >= 0.5
-            held = np.where(exists, level, np.nan)
+            held = np.where(exists, needed_m_s2, np.nan)
             low = np.nanmedian(held[:, 0]) if np.isfinite(held[:, 0]).any() else np.nan
             high = np.nanmedian(np.nanmax(held, axis=1))
             levels_m_s2 = np.geomspace(low, high, 41) if 0 < low < high else [np.nan]
-        levels = np.asarray(levels_m_s2, dtype=float)
-        true_amplitude = amplitudes_at_levels(truth, spec, levels)
-        amplitude = {k: amplitudes_at_levels(p, spec, levels) for k, p in predictions.items()}
+        excitation_m_s2 = np.asarray(levels_m_s2, dtype=float)
+        true_amplitude = amplitudes_at_levels(truth, spec, excitation_m_s2)
+        amplitude = {
+            k: amplitudes_at_levels(p, spec, excitation_m_s2) for k, p in predictions.items()
+        }
     figures: dict[str, Any] = {
         "representation": spec.representation,
-        "levels_m_s2": [_json_float(v) for v in levels],
+        "levels_m_s2": [_json_float(v) for v in excitation_m_s2],
     }
     for name, values in amplitude.items():
         both = np.isfinite(values) & np.isfinite(true_amplitude)

@@ -94,7 +94,7 @@ def export_surrogate(
     )
     sidecar = _sidecar(surrogate, graph, opset_used)
     # The graph hash covers the network; this one covers the sidecar's own fields
-    # (box, levels, scalers), so that widening the box in the JSON is noticed.
+    # (box, grid, scalers), so that widening the box in the JSON is noticed.
     sidecar["content_sha256"] = sha256_json(sidecar)
     atomic_write_bytes(folder / MODEL_FILE, graph)
     atomic_write_text(folder / SIDECAR_FILE, json.dumps(sidecar, indent=2) + "\n")
@@ -130,7 +130,7 @@ def _sidecar(surrogate: Surrogate, graph: bytes, opset: int) -> dict[str, Any]:
             },
             "head": {
                 "degree": surrogate.model.head_degree,
-                # Lower at grid points with too few training rows (levels x channels).
+                # Lower at grid points with too few training rows (grid points x channels).
                 "carried_degree": None
                 if surrogate.head_carried_degree is None
                 else surrogate.head_carried_degree.tolist(),

@@ -173,22 +173,23 @@ def grid_backbones(
     result = backbone(
         model, dense, parameters=sets, names=names, method=how.method, harmonics=how.harmonics
     )
-    level = result.base_acceleration
+    # The base acceleration (m/s²) each parameter set needs at each evaluation amplitude.
+    needed_m_s2 = result.base_acceleration
     frequency, damping = result.frequency_hz, result.damping_ratio
-    solved = result.converged & np.isfinite(level) & np.isfinite(frequency) & (frequency > 0)
-    powered = solved & (level > 0)
+    solved = result.converged & np.isfinite(needed_m_s2) & np.isfinite(frequency) & (frequency > 0)
+    powered = solved & (needed_m_s2 > 0)
     # Levels a test stepping up has passed: the running maximum before each point.
-    candidates = np.where(powered, level, -np.inf)
+    candidates = np.where(powered, needed_m_s2, -np.inf)
     before = np.maximum.accumulate(candidates, axis=1)
-    before = np.concatenate([np.full((level.shape[0], 1), -np.inf), before[:, :-1]], axis=1)
+    before = np.concatenate([np.full((needed_m_s2.shape[0], 1), -np.inf), before[:, :-1]], axis=1)
     # And the slope at each grid amplitude: a level that falls there lies past a fold
     # (unknown where the nudged point has no backbone: not counted against it).
     nudged = backbone(
         model, dense[index] * (1 + _NUDGE), parameters=sets, names=names, method=how.method,
         harmonics=how.harmonics,
     ).base_acceleration  # fmt: skip
-    falling = np.isfinite(nudged) & (nudged <= level[:, index])
-    passed = (level[:, index] <= before[:, index]) | falling
+    falling = np.isfinite(nudged) & (nudged <= needed_m_s2[:, index])
+    passed = (needed_m_s2[:, index] <= before[:, index]) | falling
     reasons = np.select(
         [~solved[:, index], ~powered[:, index], passed], [1, 2, 3], default=0
     ).astype(np.int8)
@@ -197,7 +198,7 @@ def grid_backbones(
         [
             np.where(exists, frequency[:, index], 0.0),
             np.where(exists, damping[:, index], 0.0),
-            np.where(exists, level[:, index], 0.0),
+            np.where(exists, needed_m_s2[:, index], 0.0),
             exists.astype(float),
         ],
         axis=-1,
@@ -217,10 +218,10 @@ def point_base_acceleration(curve: Backbone, level_gain: float | None = None) ->
     if level_gain is None:
         phase = 0.0 if curve.phase_error_deg is None else np.radians(curve.phase_error_deg)
         omega = 2 * np.pi * curve.frequency_hz
-        level = 2 * curve.damping_ratio * omega**2 * curve.amplitude_m / np.cos(phase)
-        if np.any(level <= 0):
+        excitation_m_s2 = 2 * curve.damping_ratio * omega**2 * curve.amplitude_m / np.cos(phase)
+        if np.any(excitation_m_s2 <= 0):
             raise ValueError("a point has no positive power input (damping ratio ≤ 0)")
-        return level
+        return excitation_m_s2
     if curve.excitation_level is None:
         raise ValueError("it has no excitation levels to scale by level_gain")
     return curve.excitation_level * level_gain

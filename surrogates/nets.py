@@ -1,8 +1,9 @@
 """The paper's backbone networks: a 1D-CNN autoencoder and a parameter-to-latent FFNN.
 
 Architecture (paper Tables 1–4), generalised to ``n_params`` inputs, ``n_levels``
-excitation levels (41 in the paper) and ``n_channels`` backbone channels (2:
-amplitude and frequency; optionally a 3rd, the damping ratio)::
+grid points (the paper's 41 excitation levels, or the response amplitudes of an
+amplitude grid) and ``n_channels`` backbone channels (2 in the paper: amplitude
+and frequency; more here, e.g. the damping ratio)::
 
     Encoder  Conv1D(64, k5, same, elu) → Conv1D(32, k5, causal, dilation 4, elu)
              → Flatten → Dense(64, relu)
@@ -13,8 +14,8 @@ amplitude and frequency; optionally a 3rd, the damping ratio)::
 Layout: every public module takes and returns backbones as ``(batch, n_levels,
 n_channels)``, the dataset's (and Keras') channels-last layout. Inside, the
 convolutions run channels-first ``(batch, channels, n_levels)`` as torch wants,
-so Flatten and Reshape order their features (channel, level) where Keras orders
-them (level, channel): the same function class and the same parameter counts,
+so Flatten and Reshape order their features (channel, grid point) where Keras
+orders them (grid point, channel): the same function class and the same parameter counts,
 but Keras weights would need that permutation to be loaded here.
 
 Padding follows Keras: "same" pads ``(k − 1)·d / 2`` on each side, "causal" pads
@@ -177,7 +178,7 @@ class PhysicalSurrogate(nn.Module):
 
     ``head``
         ``(degree, coefficients (n_monomials, n_levels, n_channels))``: a
-        polynomial in ``u`` per (level, channel) in physical units, the monomials
+        polynomial in ``u`` per (grid point, channel) in physical units, the monomials
         of :func:`~surrogates.baselines.monomial_factors`;
         ``y = s · scale + offset + head(u)``, so the network learns the
         (standardised) residual of a regression, a baseline it must beat, rather
@@ -306,9 +307,7 @@ def to_decay_rate(
     the equivalent viscous damping ``c_eq`` linear in the damping terms'
     coefficients, so ``σ = c_eq / 2`` carries no division by the
     stiffness-dependent ``ω``, which a polynomial in the parameters (the head)
-    fits poorly over a wide box: on the ±50 % bench box (2000 curves) a cubic's
-    test error in ζ at the top grid amplitude falls 15× (1.8e-5 → 1.2e-6 with the
-    true ω).
+    fits poorly over a wide box (figures: ``bench/results/surrogate_wide_*.json``).
     """
     damping, frequency = channels
     rate, weights = np.array(backbones, dtype=float), np.array(weights, dtype=float)

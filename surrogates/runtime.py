@@ -93,8 +93,9 @@ class SurrogateSpec:
     bounds
         ``(n_params, 2)`` training box, ``[low, high]`` per parameter (SI).
     levels
-        The fixed excitation levels of every backbone, increasing
-        (``"excitation_levels"`` representation); None with ``amplitudes_m``.
+        The fixed excitation levels of every backbone, increasing, in
+        ``level_unit`` (``"excitation_levels"`` representation); None with
+        ``amplitudes_m``. The name is the sidecar's key.
     channels
         Backbone channels, names from :data:`REPRESENTATION_CHANNELS` of the
         representation; the amplitude grid needs :data:`MASK_CHANNEL`.
@@ -171,7 +172,7 @@ class SurrogateSpec:
 
     @property
     def n_levels(self) -> int:
-        """Points of the grid (excitation levels, or amplitude levels of the amplitude grid)."""
+        """Grid points per backbone: excitation levels, or amplitudes of the amplitude grid."""
         return self.grid.size
 
     @property
@@ -243,10 +244,10 @@ class SurrogateSpec:
             )
         bad = ~np.isfinite(array)
         if bad.any():
-            row, level, channel = np.argwhere(bad)[0]
+            row, point, channel = np.argwhere(bad)[0]
             raise ValueError(
                 f"{what}: channel {self.channels[channel]!r} is not finite at "
-                f"level {level} of curve {row}"
+                f"level {point} of curve {row}"
             )
         if MASK_CHANNEL in self.channels:
             mask = array[..., self.channel_index(MASK_CHANNEL)]

@@ -10,7 +10,7 @@
 
 Scalings: parameters are min–max scaled with the training box (the spec's
 bounds) to [0, 1]; what the networks learn (the backbones, or with a head its
-residual) is standardised per (level, channel) by default, so that an error of
+residual) is standardised per (grid point, channel) by default, so that an error of
 a given share of its spread weighs the same at every grid point, or per channel.
 Both are folded into :class:`~surrogates.nets.PhysicalSurrogate`, the module
 that is exported.
@@ -24,7 +24,7 @@ leaves of a trivial prediction (the mask by its Brier score, see
 are 0 where a value is masked or was not observed, so neutral targets teach
 nothing; without weights every entry weighs 1 (plain MSE).
 
-``head_degree`` (ours, optional): a per-(level, channel) polynomial regression on
+``head_degree`` (ours, optional): a per-(grid point, channel) polynomial regression on
 the parameters (:class:`~surrogates.baselines.PolynomialBaseline`, 1: linear,
 3: cubic), fitted to the training rows, is part of the graph and the networks
 learn its residual, standardised by the residual's own spread; the autoencoder
@@ -35,8 +35,7 @@ with.
 networks on ``σ = 2π f ζ`` in place of the damping ratio ζ and the exported graph
 returns ``ζ = σ / (2π f)`` with its own predicted frequency. ``σ`` is half the
 equivalent viscous damping, free of the ``1/ω`` a polynomial in the stiffness
-parameters fits poorly: on the ±50 % bench box at 2000 curves it cut the damping's
-test RMSE 8× (the top amplitude's from 0.96 to 0.11 × the assembly scatter).
+parameters fits poorly over a wide box (figures: ``bench/results/surrogate_wide_*.json``).
 
 Every stage uses Adam (lr 1e-3; 1e-4 for the fine-tune; halved on plateaus),
 mini-batches of 32 (Keras' default), a validation split with early stopping
@@ -96,19 +95,18 @@ class TrainingConfig:
     ends a stage after ``patience`` epochs without a better validation loss.
     ``lr_decay_patience`` (epochs without improvement) halves the learning rate
     on plateaus, down to 1 % of it (None: the paper's constant rate). The
-    defaults (400 + 400 + 200 epochs with the decay) are as accurate on the
-    trc-like benchmark (``bench/surrogate.py``) as 3000 constant-rate epochs per
-    stage with early stopping, in about a quarter of the time. ``threads`` sets
+    defaults (400 + 400 + 200 epochs with the decay) were chosen on the
+    trc-like benchmark (``bench/surrogate.py``, results in ``bench/results/``),
+    where they match far longer constant-rate training. ``threads`` sets
     torch's CPU threads for the training (None: leave torch's setting).
-    ``head_degree`` (0: none, the paper's) adds a per-(level, channel) polynomial
+    ``head_degree`` (0: none, the paper's) adds a per-(grid point, channel) polynomial
     regression of that degree to the graph and trains the networks on its
     residual (see the module docstring).
     ``validation_fraction`` applies when no validation rows are given.
     ``mask_weight`` scales the mask's cross-entropy against the value channels'
-    squared error (in the scaled space) in the training loss. Measured on the
-    test box of ``tests/test_surrogate_grid.py`` (cubic head, 320 curves): with 1
-    the mask agreed with the harmonic balance's no better than a linear
-    probability (0.975 on test); with 4, 0.991.
+    squared error (in the scaled space) in the training loss: with an equal
+    weight, on the test box of ``tests/test_surrogate_grid.py``, the mask agreed
+    with the harmonic balance's no better than a linear probability.
     ``damping_target`` (``"decay_rate"``: ours): the head and the networks learn
     the damping channel as the decay rate ``σ = 2π f ζ`` and the graph divides by
     its own predicted ``2π f`` (:func:`~surrogates.nets.to_decay_rate`); needs the
@@ -255,8 +253,8 @@ def output_scaling(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Offset and scale, each ``(n_levels, n_channels)``, that standardise backbones.
 
-    ``"level"`` standardises every (level, channel) over the curves, ``"channel"``
-    every channel over curves and levels, each over the entries with weight > 0
+    ``"level"`` standardises every (grid point, channel) over the curves, ``"channel"``
+    every channel over curves and grid points, each over the entries with weight > 0
     (all without ``weights``). A spread of zero (a constant entry) or an entry
     without weighted values falls back to the channel's, then to 1, so the
     scaling stays invertible.
@@ -358,8 +356,7 @@ def train_surrogate(
         carried = np.where(probability, 0, regression.carried_degree)
         short = (carried[:, ~probability] < config.head_degree).any(axis=1)
         if short.any():
-            # A lower degree at a few grid points is a step in accuracy along the curve
-            # (the ±50 % bench box at 475 curves: quadratic at the top amplitude only).
+            # A lower degree at a few grid points is a step in accuracy along the curve.
             degree = config.head_degree
             coefficients = math.comb(spec.n_params + degree, degree)
             warnings.warn(

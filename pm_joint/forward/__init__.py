@@ -4,14 +4,14 @@ Every forward model maps a parameter vector θ of shape ``(..., n_params)``
 (leading batch axes allowed) to a backbone tensor of shape ``(..., n_points, 3)``
 with the columns :data:`BACKBONE_COLUMNS`: amplitude (m), frequency (Hz),
 damping ratio. NaN marks a channel the model does not give (a surrogate trained
-without damping, a PLL level that did not lock) and a parameter vector the
+without damping, a PLL hold that did not lock) and a parameter vector the
 model cannot evaluate: the forward models never raise on a bad θ mid-chain,
 the likelihood turns NaN into ``logp = -inf``. Each one exposes
 ``parameter_names`` (the order of θ) and ``n_points``.
 
 :class:`~pm_joint.forward.surrogate.SurrogateOp`
-    The exported ONNX surrogate on onnxruntime; points are its excitation
-    levels. Gradient: backpropagation through
+    The exported ONNX surrogate on onnxruntime; points are its grid (excitation
+    levels, m/s², or response amplitudes, m). Gradient: backpropagation through
     :func:`~pm_joint.forward.surrogate.surrogate_graph`, the same network
     rebuilt in pytensor from the ONNX initializers.
 :class:`~pm_joint.forward.surrogate.SurrogateGraph`
@@ -25,7 +25,7 @@ the likelihood turns NaN into ``logp = -inf``. Each one exposes
     an amplitude grid.
 :class:`~pm_joint.forward.pll.PLLOp`
     The time-domain PLL simulator as a black box (no gradient); points are its
-    excitation levels.
+    excitation levels (base-acceleration amplitudes of the holds, m/s²).
 
 :func:`forward_model` picks one by name, so one PyMC model switches between
 them with one argument.
@@ -90,6 +90,10 @@ def forward_model(
         The joint model (template of the named parameters).
     names
         Order of θ; default the surrogate's or the model's parameter names.
+    amplitudes_m
+        The harmonic balance's amplitude grid (m).
+    levels
+        The PLL holds' base-acceleration amplitudes (m/s²), in test order.
     native_graph
         The surrogate as :class:`SurrogateGraph` (its network in pytensor, for
         gradient samplers) rather than :class:`SurrogateOp` (onnxruntime).

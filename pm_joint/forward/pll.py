@@ -1,6 +1,7 @@
 """The PLL phase-resonance simulator as a forward model: :class:`PLLOp` (no gradient).
 
-Points are the excitation levels, in test order.
+Points are the excitation levels (base-acceleration amplitudes of the holds, m/s²),
+in test order.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ __all__ = ["PLLOp"]
 class PLLOp(BackboneOp):
     """The PLL phase-resonance simulator as a black-box pytensor Op (no gradient).
 
-    Points are the excitation levels, in test order. Levels that did not lock
+    Points are the excitation levels, in test order. Holds that did not lock
     are NaN; parameter vectors the simulator cannot run (non-finite values,
     shape parameters ≤ 0, a model too stiff for the sub-step limit, a
     diverging run) give NaN rows counted in :attr:`n_failed`, never an error.
@@ -57,6 +58,7 @@ class PLLOp(BackboneOp):
         super().__init__()
         self.model = model
         self.parameter_names = checked_names(model, names)
+        #: Base-acceleration amplitudes of the holds (m/s²), the points.
         self.levels = positive_vector(levels, "levels")
         self.n_points = self.levels.size
         self.config = PLLConfig() if config is None else config

@@ -1,7 +1,7 @@
 """The ONNX backbone surrogate as a forward model: :class:`SurrogateOp` and its pytensor twin.
 
-Points are the surrogate's grid: its excitation levels, or its response
-amplitudes (``"amplitude_grid"``, :mod:`surrogates.runtime`). The Op runs the
+Points are the surrogate's grid: its excitation levels (m/s²), or its response
+amplitudes (m; ``"amplitude_grid"``, :mod:`surrogates.runtime`). The Op runs the
 exported network on onnxruntime; its gradient is the backpropagation through
 :func:`surrogate_graph`, the same network rebuilt in pytensor from the ONNX
 initializers. On the amplitude grid the value channels are finite at every
@@ -34,8 +34,8 @@ __all__ = ["SurrogateGraph", "SurrogateOp", "surrogate_channel_graph", "surrogat
 class SurrogateOp(BackboneOp):
     """The ONNX backbone surrogate as a pytensor Op.
 
-    Points are the surrogate's excitation levels, in level order, or its
-    response amplitudes (the amplitude column is then the grid itself, and
+    Points are the surrogate's excitation levels (m/s²), increasing, or its
+    response amplitudes in m (the amplitude column is then the grid itself, and
     :meth:`has_backbone` gives the mask channel's probabilities). Parameter
     vectors outside the surrogate's training box, or not finite, give NaN rows
     (counted in :attr:`n_failed`) instead of an error, so a sampler that
@@ -70,6 +70,7 @@ class SurrogateOp(BackboneOp):
             )
         self.parameter_names = names
         self.n_points = runtime.spec.n_levels
+        #: The excitation levels (m/s²) of an excitation-level surrogate, else None.
         self.levels = runtime.levels
         #: The response amplitudes (m) of an amplitude-grid surrogate, else None.
         self.amplitudes_m = runtime.amplitudes_m
