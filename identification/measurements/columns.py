@@ -620,10 +620,8 @@ class ColumnCampaign(RecordFiles):
         record = _read_columns(self.paths[index], self.layout)
         if record.time_jitter and not self._told_rounding:
             self._told_rounding = True
-            warnings.warn(
-                f"{_rounded_stamps(record)}; said once for the records of {self.source}",
-                stacklevel=3,
-            )
+            once = "" if self.source.is_file() else f"; said once for the records of {self.source}"
+            warnings.warn(_rounded_stamps(record) + once, stacklevel=3)
         return record
 
     def __repr__(self) -> str:

@@ -7,9 +7,10 @@ files) the first line is the header, and it names the columns.
 
 The delimiter is a semicolon, a tab, a comma or runs of blanks. A header
 line says which (the first of ``;``, tab, ``,`` in it, else blanks); without
-one, the first data line does: ``;`` when splitting on it gives at least as
-many numbers as the comma/blank reading, else ``,`` when the line has one,
-else blanks (tabs among them). A decimal comma (German-locale exports:
+one, the first data line does: ``;`` when splitting on it reads better (all
+fields numbers, or more of them) than the comma/blank reading, else ``,`` when the line has one
+(unless it reads as blank-separated numbers with decimal commas only that
+way), else blanks (tabs among them). A decimal comma (German-locale exports:
 ``0,5;1,25``) is detected when the delimiter is not a comma and a field of
 the first data line is written with one, or stated (``decimal_comma=True``).
 
@@ -133,6 +134,12 @@ def _is_number(token: str) -> bool:
     return _is_plain_number(token) or _has_decimal_comma(token)
 
 
+def _numbers(fields: list[str]) -> tuple[bool, int]:
+    """Whether all fields are numbers, and how many are: the better split scores higher."""
+    found = sum(map(_is_number, fields))
+    return found == len(fields), found
+
+
 def _fields(text: str, delimiter: str | None) -> list[str]:
     return text.split() if delimiter is None else [f.strip() for f in text.split(delimiter)]
 
@@ -140,10 +147,18 @@ def _fields(text: str, delimiter: str | None) -> list[str]:
 def _data_delimiter(text: str) -> str | None:
     """The delimiter of a first data line (no header names it): see the module notes."""
     usual = "," if "," in text else None
-    if ";" in text:
-        numbers = sum(map(_is_number, _fields(text, ";")))
-        if numbers >= sum(map(_is_number, _fields(text, usual))):
-            return ";"
+    if ";" in text and _numbers(_fields(text, ";")) > _numbers(_fields(text, usual)):
+        return ";"
+    if usual == ",":
+        # Blank-separated numbers with decimal commas (``0,5 1,25``; a one-column
+        # ``1,5+0,5j``) are no comma-separated numbers.
+        blanks = text.split()
+        if (
+            not all(map(_is_number, _fields(text, ",")))
+            and all(map(_is_number, blanks))
+            and any(map(_has_decimal_comma, blanks))
+        ):
+            return None
     return usual
 
 
