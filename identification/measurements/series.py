@@ -2,9 +2,10 @@
 
 A measured time axis is uniform when its steps agree with their mean within
 :data:`UNIFORM` (relative); such an axis is kept as written. Time stamps that
-were rounded when written (a CSV of 7-digit stamps at 5120 Hz steps
-0.0001953 and 0.0001954 s) jitter around their mean step without drifting
-from the uniform grid: they are read on that grid, at the mean rate. A
+were rounded when written (a CSV of stamps with 7 significant digits at
+5120 Hz steps 0.0001953 and 0.0001954 s below one second, 0.000195 and
+0.000196 s above) jitter around their mean step without drifting from the
+uniform grid: they are read on that grid, at the mean rate. A
 missing sample, a jump of steps or a change of rate is no rounding and is
 refused.
 """
@@ -66,12 +67,6 @@ class RegularTime:
 
     time_s: np.ndarray
     jitter: float = 0.0
-
-    @property
-    def rate_hz(self) -> float:
-        """The mean sampling rate (Hz)."""
-        t = self.time_s
-        return (t.size - 1) / (t[-1] - t[0])
 
 
 def regular_time(time_s: np.ndarray, where: str | Path) -> RegularTime:

@@ -6,13 +6,14 @@ optional: one line of non-numeric labels is skipped. With labels (the column
 files) the first line is the header, and it names the columns.
 
 The delimiter is a semicolon, a tab, a comma or runs of blanks. A header
-line says which (the first of ``;``, tab, ``,`` in it, else blanks); without
-one, the first data line does: ``;`` when splitting on it reads better (all
-fields numbers, or more of them) than the comma/blank reading, else ``,`` when the line has one
-(unless it reads as blank-separated numbers with decimal commas only that
-way), else blanks (tabs among them). A decimal comma (German-locale exports:
-``0,5;1,25``) is detected when the delimiter is not a comma and a field of
-the first data line is written with one, or stated (``decimal_comma=True``).
+line says which (the first of ``;``, tab, ``,`` in it, else blanks). Without
+one, the first data line does: ``;`` where splitting on it reads better (all
+fields numbers, or more of them) than the comma/blank reading; else ``,``
+where the line has one, unless only blanks split it into numbers, written
+with decimal commas (``0,5 1,25``); else blanks (tabs among them). A decimal
+comma (German-locale exports: ``0,5;1,25``) is detected where the delimiter
+is not a comma and a field of the first data line is written with one, or
+stated (``decimal_comma=True``).
 
 Reading is block by block (pandas' C parser, about 16 MB of text at a time)
 into one array, so a long file needs little memory beyond its numbers. A last
