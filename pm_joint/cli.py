@@ -86,7 +86,9 @@ def _band(text: str) -> tuple[float, float]:
 
 def add_record_options(parser: argparse.ArgumentParser) -> None:
     """The options that say how records read (the same on every command that reads them)."""
-    group = parser.add_argument_group("records (TRC folders take --test; column files all)")
+    group = parser.add_argument_group(
+        "records (TRC folders take --test and --decimal-comma; column files all)"
+    )
     group.add_argument("--test", choices=TEST_TYPES, default="phase-resonance",
                        help="test type (default phase-resonance: PLL holds)")  # fmt: skip
     group.add_argument("--time", metavar="NAME", help="time column (default: time or t)")

@@ -26,7 +26,7 @@ def synthetic_record(
     damping,
     phase_errors_deg=None,
     third_harmonic=0.0,
-    levels=None,
+    drive_v=None,
     name="Config1_PRT_Assemb1",
     hold_s=HOLD_S,
 ) -> Record:
@@ -40,7 +40,7 @@ def synthetic_record(
     """
     n = len(amplitudes_m)
     eps = np.radians(np.zeros(n) if phase_errors_deg is None else phase_errors_deg)
-    levels = np.arange(1, n + 1) * 0.1 if levels is None else np.asarray(levels)
+    drive_v = np.arange(1, n + 1) * 0.1 if drive_v is None else np.asarray(drive_v)
     breakpoints = np.ravel(
         [[k * (hold_s + RAMP_S), k * (hold_s + RAMP_S) + hold_s] for k in range(n)]
     )
@@ -57,7 +57,7 @@ def synthetic_record(
     base = np.column_stack([v_base + 2e-3, v_base - 2e-3])  # their mean is the base motion
     phase_deg = np.degrees(np.angle(np.exp(1j * theta)))
     data = np.column_stack([t, np.outer(v_rel, shape) + v_base[:, None], base, f, phase_deg])
-    return Record(data, StepSchedule(breakpoints, np.repeat(levels, 2)), name)
+    return Record(data, StepSchedule(breakpoints, np.repeat(drive_v, 2)), name)
 
 
 AMPLITUDES = np.array([2e-5, 1.5e-4, 8e-4, 2.1e-3])
@@ -100,8 +100,8 @@ def test_short_hold_phases(tmp_path):
     )
     with pytest.warns(UserWarning) as caught:
         relaxed = extract_backbone(campaign[0], strict=False)
-    levels = (0.1, 0.2, 0.3, 0.4)
-    assert all(f"level {v} (" in str(w.message) for w, v in zip(caught, levels, strict=True))
+    drive_v = (0.1, 0.2, 0.3, 0.4)
+    assert all(f"level {v} (" in str(w.message) for w, v in zip(caught, drive_v, strict=True))
     assert "using its 50 whole periods" in str(caught[0].message)
     np.testing.assert_allclose(relaxed.frequency_hz, FREQUENCIES, rtol=1e-6)
 

@@ -34,7 +34,7 @@ from hypothesis.extra.numpy import arrays
 
 from identification.artifacts import IntegrityError, sha256_bytes
 from identification.effects import CATALOGUE
-from identification.measurements import records
+from identification.measurements import text_table
 from identification.measurements.backbone import Backbone
 from identification.measurements.extraction import extract_backbone
 from identification.measurements.records import DATA_COLUMNS, Record, StepSchedule, read_record
@@ -225,7 +225,7 @@ def test_record_reader_agrees_with_the_reference_or_names_the_problem(folder, ca
     path.write_bytes(text.encode())
     expected = reference_read(text, comma)
     with (
-        mock.patch.object(records, "_BLOCK_BYTES", block_bytes),
+        mock.patch.object(text_table, "_BLOCK_BYTES", block_bytes),
         warnings.catch_warnings(record=True) as caught,
     ):
         warnings.simplefilter("always")

@@ -31,7 +31,7 @@ import pymc as pm
 import pytensor.tensor as pt
 import pytest
 
-from identification.measurements import records
+from identification.measurements import text_table
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.records import DATA_COLUMNS, StepSchedule, read_record
 from identification.rig import Rig
@@ -168,7 +168,7 @@ def test_a_long_record_is_read_block_by_block_with_progress(tmp_path, monkeypatc
     data[:, 0] = np.arange(3000) / 1e4
     path = tmp_path / "Config1_PRT_Assemb1"
     np.savetxt(path, data, fmt="%.9e")
-    monkeypatch.setattr(records, "_BLOCK_BYTES", 4096)
+    monkeypatch.setattr(text_table, "_BLOCK_BYTES", 4096)
     steps = StepSchedule([0.0, 1.0], [1.0, 1.0])
     record = read_record(path, steps=steps, progress=True)
     np.testing.assert_array_equal(record.data, np.loadtxt(path))

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import identification.measurements.records as records_module
+import identification.measurements.discovery as records_module
 from identification.measurements.backbone import BackboneSet
 from pm_joint.cli import main
 from pm_joint.distributions import BackboneDensity, amplitude_levels, level_marks

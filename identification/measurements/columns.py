@@ -9,20 +9,9 @@ which and what the test was; :func:`read_columns` reads one file into a
 (:class:`~identification.measurements.records.Record`) offer, so that the
 backbones and the identification take either.
 
-Formats (every one read by its library, nothing parsed by hand):
-
-* **Text** (``.csv``, ``.tsv``, ``.txt``, ``.dat``): one header line of column
-  names, then rows; comma, semicolon, tab or blank separated; a decimal comma
-  (German-locale exports: ``0,5;1,25``) is detected when the separator is not a
-  comma, or stated (``decimal_comma=True``). Comment lines (``#``, ``%``) before
-  the header are skipped. Read by pandas' C parser. A last line without a line
-  break (a file cut short) is left out with a one-line warning.
-* **MAT v5** (scipy.io.loadmat): numeric vectors as variables, fields of a
-  struct (``data.time``), or the columns of a matrix named by a cell array of
-  strings (``names``, ``labels``, ``channels`` or ``columns``).
-* **MAT v7.3 and HDF5** (h5py): 1-D datasets (MATLAB's n×1 arrays included),
-  by their path (``group/time``) or name, and the fields of a table (compound)
-  dataset.
+Formats: CSV/TSV/text with a header (through the text-table reader the TRC
+files share), MAT v5 and v7.3, and HDF5; see
+:mod:`identification.measurements.column_formats`.
 
 A scalar ``fs``, ``sampling_rate``, ``sample_rate`` or ``sampling_rate_hz`` (a
 variable, dataset or attribute) gives the time axis when there is no time
@@ -45,6 +34,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from identification.measurements.column_formats import (
+    COLUMN_EXTENSIONS,
+    HDF5_EXTENSIONS,
+    read_table,
+)
+from identification.measurements.discovery import Campaign, RecordFiles, is_trc_source, natural_key
 from identification.measurements.quantities import (
     BASE_KINDS,
     EXCITATION_KINDS,
@@ -53,13 +48,9 @@ from identification.measurements.quantities import (
     UNITS,
     check_choice,
 )
-from identification.measurements.records import (
-    Campaign,
-    RecordFiles,
-    StepSchedule,
-    is_trc_source,
-)
+from identification.measurements.series import frozen_array, regular_time
 from identification.measurements.signals import central_difference, trapezoid_integral
+from identification.measurements.steps import StepSchedule
 
 __all__ = [
     "COLUMN_EXTENSIONS",
@@ -74,178 +65,13 @@ __all__ = [
     "write_columns",
 ]
 
-TEXT_EXTENSIONS = (".csv", ".tsv", ".txt", ".dat")
-HDF5_EXTENSIONS = (".h5", ".hdf5", ".he5")
-#: File extensions read as column-layout records.
-COLUMN_EXTENSIONS = (*TEXT_EXTENSIONS, ".mat", *HDF5_EXTENSIONS)
 _RATE_NAMES = ("fs", "sampling_rate", "sample_rate", "sampling_rate_hz", "samplingrate")
-_NAME_LISTS = ("names", "labels", "channels", "columns")
-_COMMENT = ("#", "%")
-_DECIMAL_COMMA = re.compile(r"^[+-]?\d*,\d+(?:[eE][+-]?\d+)?$")
-#: Relative spread of the time steps beyond which a record is not uniformly sampled.
-_UNIFORM = 1e-3
 
 
 def _normal(name: str) -> str:
     """A column name without case, blanks or a unit in brackets: ``Time [s]`` → ``time``."""
     name = re.sub(r"[\[(].*?[\])]", "", str(name)).strip().lower()
     return re.sub(r"[\s.\-]+", "_", name).strip("_")
-
-
-# ---------------------------------------------------------------------------
-# Reading tables
-
-
-def _text_table(path: Path, decimal_comma: bool | None) -> dict[str, np.ndarray]:
-    raw = path.read_bytes()
-    if raw.startswith(b"\xef\xbb\xbf"):
-        raw = raw[3:]
-    if raw and not raw.endswith(b"\n"):
-        cut = raw.rfind(b"\n") + 1
-        if raw[cut:].strip():
-            warnings.warn(
-                f"{path}: the last line has no line break (the file was cut short?); "
-                "that line is left out",
-                stacklevel=4,
-            )
-        raw = raw[:cut]
-    text = raw.decode("utf-8", errors="replace")
-    lines = text.splitlines(keepends=True)
-    skip = 0
-    while skip < len(lines) and (
-        not lines[skip].strip() or lines[skip].lstrip().startswith(_COMMENT)
-    ):
-        skip += 1
-    if skip + 1 >= len(lines):
-        raise ValueError(f"{path}: needs a header line of column names and rows of numbers")
-    header, first = lines[skip], lines[skip + 1]
-    for sep in (";", "\t", ","):
-        if sep in header:
-            break
-    else:
-        sep = r"\s+"
-    if decimal_comma is None:
-        fields = re.split(sep, first.strip()) if sep == r"\s+" else first.strip().split(sep)
-        decimal_comma = sep != "," and any(_DECIMAL_COMMA.match(f.strip()) for f in fields)
-    if decimal_comma and sep == ",":
-        raise ValueError(f"{path}: a decimal comma cannot go with comma-separated columns")
-    body = "".join(lines[skip:])
-    options = dict(sep=sep, engine="c", skipinitialspace=True, na_filter=False)
-    try:
-        frame = pd.read_csv(io.StringIO(body), decimal="," if decimal_comma else ".",
-                            dtype=float, **options)  # fmt: skip
-    except (ValueError, pd.errors.ParserError) as exc:
-        # Name the first bad cell: read again as text (only on this error path).
-        try:
-            text_frame = pd.read_csv(io.StringIO(body), dtype=str, **options)
-        except (ValueError, pd.errors.ParserError):
-            raise ValueError(f"{path}: not a readable table ({str(exc).splitlines()[0]})") from None
-        raise ValueError(f"{path}: {_first_bad_cell(text_frame, skip, decimal_comma)}") from None
-    columns = {}
-    for name in frame.columns:
-        values = frame[name].to_numpy(dtype=float)
-        bad = np.flatnonzero(~np.isfinite(values))
-        if bad.size:
-            row = int(bad[0])
-            raise ValueError(
-                f"{path}: row {row + 1} (line {skip + row + 2}), column {name!r}: not finite"
-            )
-        columns[str(name)] = values
-    return columns
-
-
-def _first_bad_cell(frame: pd.DataFrame, skip: int, decimal_comma: bool) -> str:
-    """Where the first cell of a text table is not a number, and what it holds."""
-    for name in frame.columns:
-        cells = frame[name].str.strip()
-        numbers = cells.str.replace(",", ".", regex=False) if decimal_comma else cells
-        bad = np.flatnonzero(pd.to_numeric(numbers, errors="coerce").isna().to_numpy())
-        if bad.size:
-            row, cell = int(bad[0]), cells.iloc[int(bad[0])]
-            hint = " (a decimal comma? pass --decimal-comma)" if "," in cell else ""
-            return (f"row {row + 1} (line {skip + row + 2}), column {name!r}: not a number: "
-                    f"{cell!r}{hint}")  # fmt: skip
-    return "rows of unequal length"
-
-
-def _mat_table(path: Path) -> dict[str, np.ndarray]:
-    from scipy.io import loadmat
-
-    data = loadmat(path, squeeze_me=True, struct_as_record=False)
-    columns: dict[str, np.ndarray] = {}
-    names = next(
-        ([str(n) for n in np.atleast_1d(data[k])] for k in data if k.lower() in _NAME_LISTS), None
-    )
-
-    def add(prefix: str, value) -> None:
-        if hasattr(value, "_fieldnames"):  # a MATLAB struct
-            for name in value._fieldnames:
-                add(f"{prefix}/{name}", getattr(value, name))
-            return
-        array = np.asarray(value)
-        if array.dtype.kind not in "fiub":
-            return
-        array = array.astype(float)
-        if array.ndim <= 1:
-            columns[prefix] = array
-        elif array.ndim == 2 and names is not None and len(names) in array.shape:
-            table = array if array.shape[1] == len(names) else array.T
-            for j, name in enumerate(names):
-                columns[name] = table[:, j]
-
-    for key, value in data.items():
-        if not key.startswith("__"):
-            add(key, value)
-    return columns
-
-
-def _hdf5_table(path: Path) -> dict[str, np.ndarray]:
-    import h5py
-
-    columns: dict[str, np.ndarray] = {}
-    with h5py.File(path, "r") as fh:
-        for key, value in fh.attrs.items():
-            if np.ndim(value) == 0 and np.asarray(value).dtype.kind in "fiu":
-                columns[key] = np.asarray(value, dtype=float)
-
-        def visit(name: str, node) -> None:
-            if not isinstance(node, h5py.Dataset) or name.startswith("#"):
-                return
-            if node.dtype.names:  # a table: one column per field
-                for field_name in node.dtype.names:
-                    columns[f"{name}/{field_name}"] = np.asarray(node[field_name], float).ravel()
-            elif node.dtype.kind in "fiu" and (node.ndim <= 1 or min(node.shape) == 1):
-                columns[name] = np.asarray(node[()], dtype=float).ravel() if node.ndim else (
-                    np.asarray(node[()], dtype=float))  # fmt: skip
-
-        fh.visititems(visit)
-    return columns
-
-
-def read_table(path: str | Path, decimal_comma: bool | None = None) -> dict[str, np.ndarray]:
-    """Every numeric column (and scalar) of a column-layout file, by name (see the module notes).
-
-    Raises
-    ------
-    ValueError
-        A missing file, an unknown extension, or content that is not a table of
-        finite numbers (naming the row and column).
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{path}: file not found")
-    suffix = path.suffix.lower()
-    if suffix in TEXT_EXTENSIONS:
-        return _text_table(path, decimal_comma)
-    if suffix == ".mat":
-        import h5py
-
-        return _hdf5_table(path) if h5py.is_hdf5(path) else _mat_table(path)  # v7.3 is HDF5
-    if suffix in HDF5_EXTENSIONS:
-        return _hdf5_table(path)
-    raise ValueError(
-        f"{path}: unknown file type {suffix!r}; column layouts are {', '.join(COLUMN_EXTENSIONS)}"
-    )
 
 
 # ---------------------------------------------------------------------------
@@ -345,7 +171,9 @@ class ColumnRecord:
     Attributes
     ----------
     time_s
-        Sample times (s), strictly increasing and uniformly sampled.
+        Sample times (s), strictly increasing and uniformly sampled; time stamps
+        rounded when written are replaced by the uniform grid of their mean rate
+        (:func:`~identification.measurements.series.regular_time`).
     response
         The response as measured (SI units of ``quantity``).
     quantity
@@ -368,12 +196,16 @@ class ColumnRecord:
         Modal forcing gain (1/kg) of a force-driven test when known.
     path
         The file it was read from.
+    time_jitter
+        Largest step deviation of the time stamps from their mean step (fraction
+        of it) where they were replaced by the uniform grid, else 0.
 
     Raises
     ------
     ValueError
         Arrays of different lengths, non-finite samples, time that is not
-        strictly increasing and uniform, and the records that cannot be
+        strictly increasing, or not uniform beyond what rounded stamps explain
+        (a gap, a jump, a change of rate), and the records that cannot be
         identified: a driven test (phase-resonance, stepped-sine) without an
         excitation channel, or with one that is zero throughout.
     """
@@ -392,18 +224,19 @@ class ColumnRecord:
     relative: bool = False
     stated_forcing_gain: float | None = None
     path: Path | None = None
+    time_jitter: float = field(default=0.0, init=False)
 
     def __post_init__(self) -> None:
         where = self.path or self.name
         check_choice("test", self.test, TEST_TYPES)
         check_choice("quantity", self.quantity, QUANTITIES)
-        time = _frozen(self.time_s)
-        arrays = {"time": time, self.response_name: _frozen(self.response)}
+        time = frozen_array(self.time_s)
+        arrays = {"time": time, self.response_name: frozen_array(self.response)}
         if self.excitation is not None:
             check_choice("excitation kind", self.excitation_kind or "", EXCITATION_KINDS)
-            arrays[self.excitation_name or "excitation"] = _frozen(self.excitation)
+            arrays[self.excitation_name or "excitation"] = frozen_array(self.excitation)
         if self.frequency_channel is not None:
-            arrays["frequency"] = _frozen(self.frequency_channel)
+            arrays["frequency"] = frozen_array(self.frequency_channel)
         for name, values in arrays.items():
             if values.ndim != 1 or values.size != time.size:
                 raise ValueError(
@@ -418,13 +251,9 @@ class ColumnRecord:
         if np.any(steps <= 0):
             i = int(np.argmax(steps <= 0))
             raise ValueError(f"{where}: time is not strictly increasing at row {i + 2}")
-        rate = (time.size - 1) / (time[-1] - time[0])
-        if np.max(np.abs(steps * rate - 1)) > _UNIFORM:
-            raise ValueError(
-                f"{where}: time is not uniformly sampled (steps {steps.min():.6g} to "
-                f"{steps.max():.6g} s); resample first"
-            )
-        object.__setattr__(self, "time_s", time)
+        regular = regular_time(time, where)
+        object.__setattr__(self, "time_s", regular.time_s)
+        object.__setattr__(self, "time_jitter", regular.jitter)
         object.__setattr__(self, "response", arrays[self.response_name])
         if self.excitation is not None:
             object.__setattr__(self, "excitation", arrays[self.excitation_name or "excitation"])
@@ -543,12 +372,6 @@ class ColumnRecord:
         )
 
 
-def _frozen(values) -> np.ndarray:
-    array = np.array(values, dtype=float)
-    array.setflags(write=False)
-    return array
-
-
 def _detrended_integral(values: np.ndarray, sampling_rate_hz: float) -> np.ndarray:
     from scipy.signal import detrend
 
@@ -599,7 +422,29 @@ def read_columns(path: str | Path, layout: ColumnLayout | None = None) -> Column
         Naming the file: columns not found or ambiguous, a quantity or excitation
         kind neither given nor said by the column's name, and every check of
         :class:`ColumnRecord`.
+
+    Warns
+    -----
+    UserWarning
+        One line when the time stamps were rounded when written: the record is
+        read on the uniform grid of their mean rate.
     """
+    record = _read_columns(path, layout)
+    if record.time_jitter:
+        warnings.warn(_rounded_stamps(record), stacklevel=2)
+    return record
+
+
+def _rounded_stamps(record: ColumnRecord) -> str:
+    """The one line that says a record's rounded time stamps were put on a uniform grid."""
+    return (
+        f"{record.path or record.name}: time stamps jitter by up to "
+        f"{100 * record.time_jitter:.2g} % of a step (rounded when written?); read on the "
+        f"uniform grid of their mean rate, {record.sampling_rate_hz:.7g} Hz"
+    )
+
+
+def _read_columns(path: str | Path, layout: ColumnLayout | None) -> ColumnRecord:
     path = Path(path)
     layout = layout or ColumnLayout()
     columns = read_table(path, layout.decimal_comma)
@@ -733,16 +578,17 @@ class ColumnCampaign(RecordFiles):
 
     Files with the extensions of :data:`COLUMN_EXTENSIONS` are records, in
     natural order of their names, except backbone tables (``backbones.csv``,
-    ``*_backbones.csv``).
+    ``*_backbones.csv``). Time stamps rounded when written are said once for
+    the campaign, at the first record that has them.
     """
 
     source: Path
     layout: ColumnLayout = field(default_factory=ColumnLayout)
     paths: tuple[Path, ...] = ()
+    #: Whether a record's rounded time stamps were announced: once per campaign.
+    _told_rounding: bool = field(default=False, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        from identification.measurements.records import _natural_key
-
         self.source = Path(self.source)
         if self.source.is_file():
             paths = [self.source]
@@ -755,7 +601,7 @@ class ColumnCampaign(RecordFiles):
                 f"{self.source}: no TRC data files (ConfigN_PRT_AssembA[_R]) and no "
                 f"column-layout files ({', '.join(COLUMN_EXTENSIONS)})"
             )
-        paths.sort(key=lambda p: _natural_key(p.name))
+        paths.sort(key=lambda p: natural_key(p.name))
         stems = [p.stem for p in paths]
         twice = sorted({s for s in stems if stems.count(s) > 1})
         if twice:
@@ -771,7 +617,12 @@ class ColumnCampaign(RecordFiles):
         return self.source
 
     def _read(self, index: int) -> ColumnRecord:
-        return read_columns(self.paths[index], self.layout)
+        record = _read_columns(self.paths[index], self.layout)
+        if record.time_jitter and not self._told_rounding:
+            self._told_rounding = True
+            once = "" if self.source.is_file() else f"; said once for the records of {self.source}"
+            warnings.warn(_rounded_stamps(record) + once, stacklevel=3)
+        return record
 
     def __repr__(self) -> str:
         return f"<ColumnCampaign {self.source}: {len(self)} records>"
@@ -809,5 +660,5 @@ def open_records(
     source = Path(source)
     layout = layout or ColumnLayout()
     if is_trc_source(source):
-        return Campaign(source, test=layout.test)
+        return Campaign(source, test=layout.test, decimal_comma=layout.decimal_comma)
     return ColumnCampaign(source, layout)

@@ -412,13 +412,13 @@ def extract_backbone(
     points, holds = hold_points(record, n_periods, harmonics, strict, forcing_gain=gain)
     where = record.path or record.name
     higher = harmonics > 1
-    levels = [h.level for h in holds]
+    hold_levels = [h.level for h in holds]  # the step schedule's: shaker V in the TRC layout
     amplitude = np.array([p.amplitude_m for p in points])
     return Backbone(
         amplitude_m=amplitude,
         frequency_hz=[p.frequency_hz for p in points],
         damping_ratio=[p.damping_ratio for p in points],
-        excitation_level=None if np.isnan(levels).any() else levels,
+        excitation_level=None if np.isnan(hold_levels).any() else hold_levels,
         phase_error_deg=[p.phase_error_deg for p in points],
         label=record.name,
         source=str(where),
