@@ -181,3 +181,34 @@ def test_a_posterior_median_gets_the_same_reading_of_its_terms(arch):
     assert group.separation["quadratic_stiffness"] == pytest.approx(
         reference.separation["quadratic_stiffness"], rel=0.3
     )
+
+
+def test_a_stand_in_whose_refit_meets_no_periodic_solution_is_said_in_words(monkeypatch):
+    """A model-term trial whose refit leaves every periodic solution behind (the README's
+    example met it: scipy's "array must not contain infs or NaNs" from the term groups'
+    refits) is a named outcome: the trial records why it was not judged, it joins no
+    group, the summary says so in words, and the criticism ends without a traceback."""
+    from identification.fitting import least_squares as ls
+
+    real = ls.predict_channels
+    first: dict[str, np.ndarray] = {}
+
+    def blows_up(model, *args, parameters=None, names=None, **kwargs):
+        out = real(model, *args, parameters=parameters, names=names, **kwargs)
+        if parameters is not None and "tanh_saturation" in model:
+            rows = np.atleast_2d(np.asarray(parameters, dtype=float))
+            start_row = first.setdefault("row", rows[0].copy())
+            out[~np.all(rows == start_row, axis=1)] = 1e200
+        return out
+
+    monkeypatch.setattr(ls, "predict_channels", blows_up)
+    truth = JointModel({"linear_stiffness": K0, "viscous_damping": C0, "cubic_stiffness": 1.4e10})
+    measured = simulated_campaign(truth, 3, seed=2, levels=8, amplitude_range_mm=(0.05, 2.0))
+    crit = criticize(truth, measured)
+    (trial,) = [t for t in crit.term_trials if t.effect == "tanh_saturation"]
+    assert not trial.fit.solved and not trial.standing
+    assert "without a periodic solution" in trial.why
+    assert crit.term_groups == [] and crit.verdict == "nothing missing"
+    assert "model-term trial: tanh_saturation in place of cubic_stiffness was not judged" in (
+        crit.summary()
+    )

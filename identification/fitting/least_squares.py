@@ -663,6 +663,8 @@ def _refine(
     best: dict[str, np.ndarray] = {"u": np.zeros(len(free))}
 
     def residual(u: np.ndarray) -> np.ndarray:
+        if not np.isfinite(u).all():
+            raise _NoPeriodicSolution  # a step computed from an overflowed Jacobian
         last["u"], last["r"] = u.copy(), residuals(u[None])[0]
         with np.errstate(over="ignore"):
             cost = float(last["r"] @ last["r"])
@@ -718,6 +720,8 @@ def _refine(
             if not isinstance(error, _NoPeriodicSolution) and "infs or NaNs" not in str(error):
                 raise
             solution = None
+    if solution is not None and not np.isfinite(solution.cost):
+        solution = None  # it never left a start whose response is absurd
     if solution is None:
         # A named outcome, not a traceback: the best model the optimiser could evaluate.
         fitted = start.with_parameters(dict(zip(free, values(best["u"]), strict=True)))
