@@ -245,6 +245,9 @@ class Group:
     def __str__(self) -> str:
         return self.text
 
+    def __repr__(self) -> str:
+        return f"<Group: {self.text}>"
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "effects": list(self.effects),
@@ -322,6 +325,9 @@ class TermGroup:
 
     def __str__(self) -> str:
         return self.text
+
+    def __repr__(self) -> str:
+        return f"<TermGroup: {self.text}>"
 
     def to_dict(self) -> dict[str, Any]:
         return {

@@ -78,6 +78,8 @@ def caveats(crit: Criticism) -> list[str]:
     where = no_solution(data.levels_m, mean_prediction(data, crit.fit.predicted))
     if where:
         out.append(f"the model as given has {where}")
+    if not crit.base.solved:
+        out.append(crit.base.outcome_text)
     return out
 
 
