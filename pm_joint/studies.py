@@ -34,11 +34,11 @@ from scipy import stats
 
 from identification.analytical.harmonic import backbone as harmonic_backbone
 from identification.analytical.pll import pll_backbones
-from identification.criticism.criticism import Criticism, criticize, run_rounds
+from identification.criticism.criticism import Criticism, SwapTrial, criticize, run_rounds
 from identification.effects import CATALOGUE
 from identification.fitting.data import FitData
-from identification.fitting.least_squares import FitResult, fit_backbones
-from identification.fitting.prediction import predict_channels
+from identification.fitting.fitter import Fitter
+from identification.fitting.least_squares import FitResult
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.extraction import extract_backbones
 from identification.measurements.records import Record
@@ -279,7 +279,7 @@ class StudyResult:
     def _linear_fit(self) -> FitResult:
         """The bare linear model refitted to the first criticism's data."""
         crit = self.criticisms[0]
-        return crit._refit_structure(_bare_linear(crit.base.model))
+        return crit.refits.structure(_bare_linear(crit.base.model))
 
     def _linear_rmse(self, channel: str) -> float | None:
         return getattr(self._linear_fit, _STEP_RMSE[channel])
@@ -370,7 +370,7 @@ class StudyResult:
             "groups": groups,
             "added": self.added,
             "kept": self.kept,
-            "swaps": [s for c in self.criticisms for s in c.swaps if s["kept"]],
+            "swaps": [s.to_dict() for c in self.criticisms for s in c.swaps if s.kept],
             "in_start": self.in_start,
             "start_adequate": self.start_adequate,
             "truth_gap_se": self.truth_gap,
@@ -414,7 +414,7 @@ def _start_model(
     else:
         raise ValueError(f"start must be 'base', 'linear' or 'sindy', got {start!r}")
     # the user's first fit: frequency and damping of the backbones alone
-    return fit_backbones(model, measured.without_harmonics()).model
+    return Fitter.from_backbones(measured.without_harmonics()).fit(model).model
 
 
 def criticism_study(
@@ -757,24 +757,23 @@ def swap_study(
             alternatives = first.alternatives(added)
             swapped = first.add(added).swap({added: alternatives}, last="")
             trials = [
-                {key: t[key] for key in ("add", "delta_chi2", "kept", "why")} for t in swapped.swaps
+                {key: getattr(t, key) for key in ("add", "delta_chi2", "kept", "why")}
+                for t in swapped.swaps
             ]
-            kept = [t for t in swapped.swaps if t["kept"]]
+            kept = [t for t in swapped.swaps if t.kept]
             change = kept[0] if kept else None
-            truth_trial = [t for t in swapped.swaps if t["add"] == effect]
+            truth_trial = [t for t in swapped.swaps if t.add == effect]
             row |= {
                 "alternatives": alternatives,
                 "trials": trials,
                 "best_replacement_gain": max(
-                    (t["delta_chi2"] for t in swapped.swaps if t["add"] is not None),
+                    (t.delta_chi2 for t in swapped.swaps if t.add is not None),
                     default=None,
                 ),
                 "decision": _swap_decision(change),
                 "false_swap": None if wrong_first else change is not None,
-                "corrected": (change is not None and change["add"] == effect)
-                if wrong_first
-                else None,
-                "swap_veto": ("worse" in truth_trial[0]["why"]) if truth_trial else None,
+                "corrected": (change is not None and change.add == effect) if wrong_first else None,
+                "swap_veto": ("worse" in truth_trial[0].why) if truth_trial else None,
             }
         row["seconds"] = time.perf_counter() - began
         rows.append(row)
@@ -822,10 +821,10 @@ def term_group_study(
         twin = _noise_free_twin(crit, truth)
         trials = []
         for trial in crit.term_trials:
-            entry = {key: trial[key] for key in ("term", "effect", "needed", "delta_chi2", "why",
-                                                 "standing")}  # fmt: skip
-            if trial["effect"] is not None:
-                stand_in = crit.base.model.without(trial["term"]).with_effect(trial["effect"], 0.0)
+            keys = ("term", "effect", "needed", "delta_chi2", "why", "standing")
+            entry = {key: getattr(trial, key) for key in keys}
+            if trial.effect is not None:
+                stand_in = crit.base.model.without(trial.term).with_effect(trial.effect, 0.0)
                 entry["lambda"] = _twin_chi2(crit, twin, stand_in)
             trials.append(entry)
         row = {
@@ -854,10 +853,7 @@ def _noise_free_twin(crit: Criticism, truth: JointModel) -> FitData:
     data = crit.data
     data.metric()
     data.metric(crit.base.weights)  # the metrics a refit asks for, estimated on the campaign
-    predicted = predict_channels(
-        truth, data.amplitude_m, data.channels, method=crit._method_for(truth),
-        excitation_harmonics=data.excitation_harmonics,
-    )  # fmt: skip
+    predicted = crit.fitter.predict(truth)
     values = np.where(np.isfinite(data.values), predicted, np.nan)
     return dataclasses.replace(data, values=values, _metrics=dict(data._metrics))
 
@@ -866,18 +862,16 @@ def _twin_chi2(crit: Criticism, twin: FitData, model: JointModel) -> float:
     """``model``'s structure refitted to the noise-free twin, its ``χ²`` there in the
     campaign's metric."""
     keys = set(twin._metrics)
-    fit = fit_backbones(model, twin, method=crit._method_for(model), weights=crit.weights or None)
+    fit = Fitter(twin, crit.method, crit.weights).fit(model, method=crit.fitter.method_for(model))
     if set(twin._metrics) != keys:
         raise RuntimeError("the refit asked for a metric the campaign's data did not estimate")
     z = crit.metric.whiten(twin.mean_residual(fit.predicted))
     return float(z @ z)
 
 
-def _swap_decision(change: Mapping[str, Any] | None) -> str:
+def _swap_decision(change: SwapTrial | None) -> str:
     """A swap step's outcome in words: "kept", "replaced by <effect>" or "removed"."""
-    if change is None:
-        return "kept"
-    return f"replaced by {change['add']}" if change["add"] else "removed"
+    return "kept" if change is None else change.decision
 
 
 def clopper_pearson(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:

@@ -653,3 +653,21 @@ def test_the_swap_step_replaces_a_stand_in_the_greedy_step_took():
     assert kept["remove"] == "microslip" and kept["add"] == "van_der_pol"
     assert kept["delta_chi2"] > 6.63  # the data tell them apart (χ²₁, 1 %)
     assert all({"significant", "ranking", "groups", "swaps"} <= set(r) for r in rounds)
+
+
+def test_results_print_as_short_readable_summaries(linear_criticised, capsys):
+    """``print(crit.missing())`` prints ranked catalogue effects with ΔBIC and a physical
+    reading (the arrays stay behind the attributes); a criticism's repr says its model
+    and, once decided, its verdict; a candidate not refitted is one line."""
+    crit = linear_criticised
+    print(crit.missing())
+    out = capsys.readouterr().out
+    assert out.startswith("[<Candidate cubic_stiffness: explained, ΔBIC -")
+    assert "hardening" in out and "array(" not in out and "FitResult" not in out
+    assert len(out.splitlines()) <= 2 * len(crit.missing())
+    text = repr(crit)
+    assert text.startswith("<Criticism of ẍ") and "explained by cubic_stiffness" in text
+    assert "\n" not in text and "array(" not in text
+    (quiet,) = [c for c in crit.candidates[-1:] if c.fit is None]
+    assert repr(quiet).startswith(f"<Candidate {quiet.effect}: ") and "\n" not in repr(quiet)
+    assert str(crit.where()[0]) == crit.where()[0].text

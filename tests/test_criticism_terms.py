@@ -93,9 +93,9 @@ def test_the_loop_swaps_the_start_term_for_the_effect_the_data_prefer(arch):
     )
     assert last.history[-1].added == ("quadratic_stiffness",)
     assert last.history[-1].removed == ("velocity_squared",)
-    (kept,) = [t for t in last.swaps if t["kept"]]
-    assert (kept["remove"], kept["add"]) == ("velocity_squared", "quadratic_stiffness")
-    assert kept["delta_chi2"] > engine.SEPARATION
+    (kept,) = [t for t in last.swaps if t.kept]
+    assert (kept.remove, kept.add) == ("velocity_squared", "quadratic_stiffness")
+    assert kept.delta_chi2 > engine.SEPARATION
     assert crit.swaps == [] and len(crit.history) == 1  # the start's criticism untouched
     row = StudyResult("lab-hidden-quadratic-stiffness", 0, "sindy", truth,
                       ("quadratic_stiffness",), measured, [], start, chain)  # fmt: skip
@@ -113,13 +113,14 @@ def test_a_term_no_catalogue_effect_mimics_gets_no_group():
     measured = simulated_campaign(truth, 3, seed=2, levels=8, amplitude_range_mm=(0.05, 2.0))
     crit = criticize(truth, measured)
     assert crit.verdict == "nothing missing", crit.summary()
-    rivals = crit._term_rivals("cubic_stiffness")
+    rivals = crit.grouping.term_rivals("cubic_stiffness")
     assert "tanh_saturation" in rivals  # the refits ran: the answer is theirs, not the screen's
     assert crit.term_groups == []
     assert "0 model-term groups" in crit.summary()
     base = crit.base.model
-    tanh = crit._refit_structure(base.without("cubic_stiffness").with_effect("tanh_saturation", 0))
-    assert any("terms cancel" in p for p in crit._objections(tanh, crit._channel_chi2(crit.base)))
+    tanh = crit.refits.structure(base.without("cubic_stiffness").with_effect("tanh_saturation", 0))
+    before = crit.decision.channel_chi2(crit.base)
+    assert any("terms cancel" in p for p in crit.decision.objections(tanh, before))
 
 
 def test_the_truths_term_is_not_grouped_with_a_stand_in_the_data_reject(arch):
@@ -130,8 +131,8 @@ def test_the_truths_term_is_not_grouped_with_a_stand_in_the_data_reject(arch):
     crit = criticize(truth, measured)
     assert crit.verdict == "nothing missing", crit.summary()
     pair = ("quadratic_stiffness", "velocity_squared")
-    (trial,) = [t for t in crit.term_trials if (t["term"], t["effect"]) == pair]
-    assert trial["why"] == "" and trial["delta_chi2"] < -engine.SEPARATION
+    (trial,) = [t for t in crit.term_trials if (t.term, t.effect) == pair]
+    assert trial.why == "" and trial.delta_chi2 < -engine.SEPARATION
     assert not any("velocity_squared" in g.effects for g in crit.term_groups)
 
 
@@ -146,7 +147,7 @@ def test_a_swap_that_changes_nothing_leaves_the_criticism_as_it_was():
     swapped = after.swap({"cubic_stiffness": []}, last="")
     assert after.swaps == []
     (trial,) = swapped.swaps
-    assert trial["remove"] == "cubic_stiffness" and not trial["kept"]
+    assert trial.remove == "cubic_stiffness" and not trial.kept
     assert swapped.base.model == after.base.model and swapped.history == after.history
 
 
@@ -179,4 +180,35 @@ def test_a_posterior_median_gets_the_same_reading_of_its_terms(arch):
     assert "quadratic_stiffness" in group.favoured
     assert group.separation["quadratic_stiffness"] == pytest.approx(
         reference.separation["quadratic_stiffness"], rel=0.3
+    )
+
+
+def test_a_stand_in_whose_refit_meets_no_periodic_solution_is_said_in_words(monkeypatch):
+    """A model-term trial whose refit leaves every periodic solution behind (the README's
+    example met it: scipy's "array must not contain infs or NaNs" from the term groups'
+    refits) is a named outcome: the trial records why it was not judged, it joins no
+    group, the summary says so in words, and the criticism ends without a traceback."""
+    from identification.fitting import least_squares as ls
+
+    real = ls.predict_channels
+    first: dict[str, np.ndarray] = {}
+
+    def blows_up(model, *args, parameters=None, names=None, **kwargs):
+        out = real(model, *args, parameters=parameters, names=names, **kwargs)
+        if parameters is not None and "tanh_saturation" in model:
+            rows = np.atleast_2d(np.asarray(parameters, dtype=float))
+            start_row = first.setdefault("row", rows[0].copy())
+            out[~np.all(rows == start_row, axis=1)] = 1e200
+        return out
+
+    monkeypatch.setattr(ls, "predict_channels", blows_up)
+    truth = JointModel({"linear_stiffness": K0, "viscous_damping": C0, "cubic_stiffness": 1.4e10})
+    measured = simulated_campaign(truth, 3, seed=2, levels=8, amplitude_range_mm=(0.05, 2.0))
+    crit = criticize(truth, measured)
+    (trial,) = [t for t in crit.term_trials if t.effect == "tanh_saturation"]
+    assert not trial.fit.solved and not trial.standing
+    assert "without a periodic solution" in trial.why
+    assert crit.term_groups == [] and crit.verdict == "nothing missing"
+    assert "model-term trial: tanh_saturation in place of cubic_stiffness was not judged" in (
+        crit.summary()
     )

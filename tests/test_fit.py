@@ -288,3 +288,47 @@ def test_a_force_drives_the_model_as_its_equivalent_base_acceleration():
     assert np.abs(wrong - as_force)[:, 2:4].max() > 1e-4
     with pytest.raises(ValueError, match="excitation kind"):
         predict(own_frame(force), "base-velocity")
+
+
+def test_a_refit_into_a_region_without_a_periodic_solution_is_a_named_outcome(monkeypatch):
+    """Where the optimiser's steps reach parameters whose harmonic balance gives an absurd
+    response (the README's example on a 3-assembly trc-like campaign met this in the
+    model-term groups' refits: scipy's "array must not contain infs or NaNs"), the fit ends
+    as :attr:`FitOutcome.NO_PERIODIC_SOLUTION` with the best model it could evaluate and
+    says so in words, never a traceback; the fits that never go there are unchanged."""
+    from identification.fitting import least_squares as ls
+
+    truth = linear().with_effect("cubic_stiffness", 1.4e10)
+    measured = curves([truth], noise_hz=0.005, noise_zeta=2e-6)
+    start = linear().with_effect("cubic_stiffness", 0.0)
+    plain = fit_backbones(start, measured)
+    assert plain.outcome is ls.FitOutcome.CONVERGED and plain.solved
+    real = ls.predict_channels
+    first: dict[str, np.ndarray] = {}
+
+    def blows_up(model, *args, parameters=None, **kwargs):
+        """Every step away from the optimiser's start "converges" to an absurd response."""
+        out = real(model, *args, parameters=parameters, **kwargs)
+        if parameters is not None:
+            rows = np.atleast_2d(np.asarray(parameters, dtype=float))
+            start_row = first.setdefault("row", rows[0].copy())
+            out[~np.all(rows == start_row, axis=1)] = 1e200
+        return out
+
+    monkeypatch.setattr(ls, "predict_channels", blows_up)
+    result = fit_backbones(start, measured)
+    assert result.outcome is ls.FitOutcome.NO_PERIODIC_SOLUTION and not result.solved
+    assert not result.success and "periodic solution" in result.outcome_text
+    assert np.isfinite(result.chi2)  # the best model it could evaluate, not the absurd one
+    assert "no periodic solution" in repr(result)
+
+
+def test_a_fit_result_prints_as_a_short_summary():
+    """A FitResult's repr is a few lines (equation, outcome, χ², RMSE, the fitted
+    parameters), not its arrays."""
+    truth = linear().with_effect("cubic_stiffness", 1.4e10)
+    result = fit_backbones(linear().with_effect("cubic_stiffness", 0.0), curves([truth]))
+    text = repr(result)
+    assert text.startswith("<FitResult ") and "converged" in text and "χ²" in text
+    assert "cubic_stiffness=1.4" in text and "array(" not in text
+    assert len(text.splitlines()) <= 4

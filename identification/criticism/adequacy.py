@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from identification.effects import CATALOGUE
+from identification.effects import CATALOGUE, LINEAR_STIFFNESS
 from identification.model import JointModel
 
 __all__ = ["CANCELLATION", "NEARBY_MODE", "admissibility", "no_solution", "onset_only"]
@@ -118,10 +118,10 @@ AT_REST = 1e-3
 def _negative_at_rest(model: JointModel, smallest_m: float, omega: float) -> list[str]:
     """Nonlinear terms with a negative stiffness at rest, made up for by the linear one."""
     out = []
-    linear = model.coefficient("linear_stiffness") if "linear_stiffness" in model else 0.0
+    linear = model.coefficient(LINEAR_STIFFNESS) if LINEAR_STIFFNESS in model else 0.0
     rest = np.array([AT_REST * smallest_m])
     for term in model.terms:
-        if term.effect == "linear_stiffness":
+        if term.effect == LINEAR_STIFFNESS:
             continue
         k_eq, _ = CATALOGUE[term.effect].describing(rest, np.array([omega]), **term.shape)
         at_rest = float(term.coefficient * np.ravel(k_eq)[0])
@@ -154,9 +154,9 @@ def onset_only(model: JointModel, levels_m: np.ndarray) -> str | None:
     not a better fit: a second response point or the mode shape (a second mode has its
     own shape and resonance), or levels beyond ``2 a_s`` where slip's damping must fall.
     """
-    if "microslip" not in model:
+    term = next((t for t in model.terms if CATALOGUE[t.effect].hysteretic), None)
+    if term is None:
         return None
-    term = next(t for t in model.terms if t.effect == "microslip")
     slip = term.shape["F_s"] / term.shape["k_t"]
     top = float(levels_m[-1])
     if top >= 2 * slip:

@@ -22,7 +22,7 @@ the statistics computed on each. The catalogue and reference tests are combined 
 the smaller of their bootstrap p-values, calibrated so that *either* fires on a null
 campaign with probability ``α``; the ``where()`` bound, the adequacy bounds per channel
 group and of the total ``χ²`` are the ``1 − α`` quantiles of theirs. Everything is
-linear algebra on ``p × p`` matrices, so 2 000 campaigns take about a second.
+linear algebra on ``p × p`` matrices, so thousands of bootstrap campaigns are cheap.
 """
 
 from __future__ import annotations

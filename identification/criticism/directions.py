@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import BSpline
 
-from identification.effects import get_effect
+from identification.effects import CATALOGUE, get_effect
 from identification.fitting.data import FitData, Metric
 from identification.fitting.least_squares import fit_scale, natural_coefficient
 from identification.fitting.prediction import predict_channels, resolve_method
@@ -118,7 +118,8 @@ def _probe_coefficients(
     drop or a saturation of one shape acts at small amplitudes only, of another at
     all; one probe for every shape would be lost in the solver's noise for some and
     leave the linear range for others)."""
-    if effect == "microslip":  # the shape grid sets the stuck stiffness (a tenth of the model's)
+    # a hysteretic element's shape grid sets its stuck stiffness (a tenth of the model's)
+    if CATALOGUE[effect].hysteretic:
         return np.full(len(shapes), PROBE)
     scale = fit_scale(model, data)
     amplitudes = np.geomspace(*scale.amplitude_m, 5)

@@ -55,7 +55,7 @@ def plot_comparison(crit: Any, axes) -> Any:
     """
     axes = np.asarray(axes).reshape(2, -1)
     data = crit.data
-    levels_mm = 1e3 * data.levels_m
+    amplitudes_mm = 1e3 * data.levels_m
     grid = np.geomspace(data.amplitude_m.min(), data.amplitude_m.max(), 80)
     model = crit.base.model
     curve = crit.predict_at(model, grid)
@@ -73,13 +73,13 @@ def plot_comparison(crit: Any, axes) -> Any:
         top.plot(1e3 * grid, factor * curve[:, j], "k-", lw=2, label="model")
         entry = crit.comparison[channel]
         if "band_low" in entry:
-            top.fill_between(levels_mm, factor * entry["band_low"], factor * entry["band_high"],
+            top.fill_between(amplitudes_mm, factor * entry["band_low"], factor * entry["band_high"],
                              color="C0", alpha=0.2, label="posterior 95 %")  # fmt: skip
         top.set(xscale="log", ylabel=f"{_title(label)} ({'%' if factor == 100 else unit})")
         residual, se = crit.residual(channel)
-        bottom.fill_between(levels_mm, -bound * factor * se, bound * factor * se, color="0.85",
+        bottom.fill_between(amplitudes_mm, -bound * factor * se, bound * factor * se, color="0.85",
                             label=f"±{bound:.2g} SE (calibrated bound)")  # fmt: skip
-        bottom.plot(levels_mm, factor * residual, "o-", color="C3", label="mean residual")
+        bottom.plot(amplitudes_mm, factor * residual, "o-", color="C3", label="mean residual")
         bottom.axhline(0.0, color="k", lw=0.8)
         for failure in failures:
             if failure.channel == label:
@@ -102,7 +102,7 @@ def plot_signatures(crit: Any, axes, top: int = 3) -> Any:
     """
     axes = np.atleast_1d(np.asarray(axes)).ravel()
     data = crit.data
-    levels_mm = 1e3 * data.levels_m
+    amplitudes_mm = 1e3 * data.levels_m
     shown = [c for c in crit.candidates if c.fit is not None][:top]
     base = shown[0].base if shown else crit.base
     residual = data.mean_residual(base.predicted)
@@ -111,12 +111,14 @@ def plot_signatures(crit: Any, axes, top: int = 3) -> Any:
     for ax, (label, channel) in zip(axes, _panels(crit, residual, len(axes)), strict=False):
         _, unit, factor = CHANNEL_LABELS[label]
         j = data.column(channel)
-        ax.fill_between(levels_mm, -bound * factor * se[:, j], bound * factor * se[:, j],
+        ax.fill_between(amplitudes_mm, -bound * factor * se[:, j], bound * factor * se[:, j],
                         color="0.85")  # fmt: skip
-        ax.plot(levels_mm, factor * residual[:, j], "ko-", lw=2, label="residual (refitted model)")
+        ax.plot(
+            amplitudes_mm, factor * residual[:, j], "ko-", lw=2, label="residual (refitted model)"
+        )
         for k, candidate in enumerate(shown):
             legend = f"{candidate.effect} (Δχ² {candidate.delta_chi2:.0f}, {candidate.status})"
-            ax.plot(levels_mm, factor * candidate.signature[channel], "--", color=f"C{k}",
+            ax.plot(amplitudes_mm, factor * candidate.signature[channel], "--", color=f"C{k}",
                     label=legend)  # fmt: skip
         ax.axhline(0.0, color="k", lw=0.8)
         ax.set(xscale="log", xlabel="amplitude (mm)", ylabel=unit, title=_title(label))

@@ -43,21 +43,21 @@ def _reading(
     model with and without it); changes below twice the standard error of the
     measured mean are not mentioned.
     """
-    levels_mm = 1e3 * data.levels_m
+    amplitudes_mm = 1e3 * data.levels_m
     _, se = data.level_mean(data.values)
     phrases = []
     f = own["frequency_hz"] - own["frequency_hz"][0]
     i = int(np.argmax(np.abs(f)))
     if abs(f[i]) > 2 * np.median(se[:, 0]):
         verb = "softening" if f[i] < 0 else "hardening"
-        phrases.append(f"frequency {verb} by {abs(f[i]):.2g} Hz up to {levels_mm[i]:.2g} mm")
+        phrases.append(f"frequency {verb} by {abs(f[i]):.2g} Hz up to {amplitudes_mm[i]:.2g} mm")
     d = own["damping_ratio"]
     i = int(np.argmax(np.abs(d)))
     if abs(d[i]) > 2 * np.median(se[:, 1]):
         what = "adding" if d[i] > 0 else "removing"
         phrases.append(
             f"damping {_trend(d)}, {what} up to {100 * abs(d[i]):.2g} %-points at "
-            f"{levels_mm[i]:.2g} mm"
+            f"{amplitudes_mm[i]:.2g} mm"
         )
     if data.has_harmonics and all(f"harmonic{o}_cos" in own for o in HARMONIC_ORDERS):
         for order in HARMONIC_ORDERS:
@@ -67,7 +67,7 @@ def _reading(
                 ordinal = {2: "2nd", 3: "3rd"}[order]
                 phrases.append(
                     f"a {ordinal} harmonic of {100 * q[i]:.2g} % of the fundamental at "
-                    f"{levels_mm[i]:.2g} mm"
+                    f"{amplitudes_mm[i]:.2g} mm"
                 )
     evidence = (" while ".join(phrases[:2]) + "".join(f", {p}" for p in phrases[2:])) or (
         "a change below the scatter"

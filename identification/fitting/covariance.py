@@ -197,14 +197,14 @@ def along_levels_target(correlation: np.ndarray, channel_of: np.ndarray) -> np.n
     ``(batch, p, p)`` target correlations (unit diagonal).
     """
     channels = np.unique(channel_of).size
-    levels = channel_of.size // channels
-    grid = correlation.reshape(-1, levels, channels, levels, channels)
+    n_levels = channel_of.size // channels
+    grid = correlation.reshape(-1, n_levels, channels, n_levels, channels)
     within = np.diagonal(grid, axis1=2, axis2=4)  # (batch, l, l', c)
     # pooled[b, k, c]: the mean over l of the correlation of (l, c) with (l + k, c), k ≥ 0
     pooled = np.stack(
-        [np.trace(within, offset=k, axis1=1, axis2=2) / levels for k in range(levels)], axis=1
+        [np.trace(within, offset=k, axis1=1, axis2=2) / n_levels for k in range(n_levels)], axis=1
     )
-    distance = np.abs(np.arange(levels)[:, None] - np.arange(levels)[None, :])
+    distance = np.abs(np.arange(n_levels)[:, None] - np.arange(n_levels)[None, :])
     target = np.zeros_like(grid)
     for c in range(channels):
         target[:, :, c, :, c] = pooled[:, distance, c]

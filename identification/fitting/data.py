@@ -123,14 +123,14 @@ def measurement_levels(measured: BackboneSet) -> np.ndarray:
         counts.append(max(np.unique(a[run][inside[run]]).size for run in branches(a)))
         pooled.append(a[inside])
     n = int(np.clip(np.median(counts), 3, 41))
-    levels = np.quantile(np.concatenate(pooled), np.linspace(0.0, 1.0, n))
-    return np.unique(np.clip(levels, low, high))
+    amplitudes_m = np.quantile(np.concatenate(pooled), np.linspace(0.0, 1.0, n))
+    return np.unique(np.clip(amplitudes_m, low, high))
 
 
 def _branch_values(
     runs: Sequence[Sequence[np.ndarray]],
     amplitude: np.ndarray,
-    levels: np.ndarray,
+    levels_m: np.ndarray,
     per_point: np.ndarray,
 ) -> np.ndarray:
     """``(n_curves, n_branches, n_levels, n_columns)`` each branch interpolated to the levels.
@@ -140,15 +140,15 @@ def _branch_values(
     levels next to a NaN point (a model without a periodic solution there) only.
     """
     n_branches = max(len(r) for r in runs)
-    out = np.full((len(runs), n_branches, levels.size, per_point.shape[1]), np.nan)
-    log_levels = np.log(levels)
+    out = np.full((len(runs), n_branches, levels_m.size, per_point.shape[1]), np.nan)
+    log_levels = np.log(levels_m)
     for i, curve_runs in enumerate(runs):
         for b, rows in enumerate(curve_runs):
             unique, inverse = np.unique(amplitude[rows], return_inverse=True)
             if unique.size < 2:
                 continue
             counts = np.bincount(inverse)
-            inside = (levels >= unique[0] * (1 - 1e-12)) & (levels <= unique[-1] * (1 + 1e-12))
+            inside = (levels_m >= unique[0] * (1 - 1e-12)) & (levels_m <= unique[-1] * (1 + 1e-12))
             for j in range(per_point.shape[1]):
                 column = per_point[rows, j]
                 mean = np.bincount(inverse, weights=column) / counts
@@ -317,19 +317,19 @@ class FitData:
         channels; entries level-major), estimated from the curves as
         :func:`identification.fitting.covariance.estimate` does for a simulated campaign."""
         curves = self.curves_at_levels[:, :, channels]
-        n, levels, n_channels = curves.shape
+        n, n_levels, n_channels = curves.shape
         errors = self.at_levels(self.standard_error**2)[:, :, channels]
         variance_floor = np.nanmean(errors, axis=0).reshape(-1)
         per_curve, lam_r, lam_v = cov.estimate(
             curves.reshape(1, n, -1),
-            np.tile(np.arange(n_channels), levels),
+            np.tile(np.arange(n_channels), n_levels),
             np.log(self.levels_m),
             variance_floor,
         )
         floors = np.array([self.noise_floor[_floor_key(c)] for c in self.channels])[channels]
         return cov.LevelCovariance(
             per_curve[0],
-            np.tile(floors**2, levels),
+            np.tile(floors**2, n_levels),
             n,
             float(lam_r[0]),
             float(lam_v[0]),

@@ -32,6 +32,7 @@ import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from enum import StrEnum
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -51,6 +52,7 @@ from identification.measurements.backbone import BackboneSet
 from identification.model import JointModel
 
 __all__ = [
+    "FitOutcome",
     "FitResult",
     "default_free",
     "default_shape_grid",
@@ -63,6 +65,21 @@ __all__ = [
 
 # --------------------------------------------------------------------------
 # Fit results
+
+
+class FitOutcome(StrEnum):
+    """How a fit ended (:attr:`FitResult.outcome`)."""
+
+    #: The optimiser converged (or the model was evaluated as given).
+    CONVERGED = "converged"
+    #: The information criteria stopped moving (:data:`STALL_IC`).
+    STALLED = "stalled"
+    #: The optimiser stopped without converging (its message says why).
+    NOT_CONVERGED = "not converged"
+    #: The optimiser met parameters where the model has no periodic solution at some
+    #: measured amplitudes and could not go on from there: the result is the last model
+    #: it could evaluate, not a fit.
+    NO_PERIODIC_SOLUTION = "no periodic solution"
 
 
 @dataclass(frozen=True)
@@ -91,6 +108,9 @@ class FitResult:
         Number of residual entries (levels × channels that count).
     success, message
         Optimiser outcome.
+    outcome
+        How the fit ended (:class:`FitOutcome`); :attr:`solved` is False where it met a
+        region without a periodic solution (:attr:`outcome_text` says so in words).
     """
 
     model: JointModel
@@ -106,6 +126,36 @@ class FitResult:
     n_residuals: int
     success: bool = True
     message: str = ""
+    outcome: FitOutcome = FitOutcome.CONVERGED
+
+    @property
+    def solved(self) -> bool:
+        """Whether the fit ended in a model it could judge (not stopped by a region without
+        a periodic solution)."""
+        return self.outcome is not FitOutcome.NO_PERIODIC_SOLUTION
+
+    @property
+    def outcome_text(self) -> str:
+        """How the fit ended, in words."""
+        if self.outcome is FitOutcome.NO_PERIODIC_SOLUTION:
+            return (
+                f"the refit of {self.model.equation()} met parameters without a periodic "
+                "solution at some measured amplitudes and stopped there (not a fit)"
+            )
+        return self.outcome.value + (f" ({self.message})" if self.message else "")
+
+    def __repr__(self) -> str:
+        """Equation, fitted parameters, χ² and how the fit ended; the arrays are behind
+        the attributes (``predicted``, ``weights``, ``data``)."""
+        parameters = ", ".join(f"{n}={self.model.parameters[n]:.4g}" for n in self.free)
+        harmonics = "" if self.harmonic_rmse is None else f", harmonics {self.harmonic_rmse:.3g}"
+        return (
+            f"<FitResult {self.model.equation()} ({self.method} harmonic balance): "
+            f"{self.outcome.value}, χ² {self.chi2:.4g}, BIC {self.bic:.4g}\n"
+            f"  RMSE frequency {self.frequency_rmse_hz:.3g} Hz, damping "
+            f"{self.damping_rmse:.3g}{harmonics}"
+            + (f"\n  fitted: {parameters}>" if parameters else ">")
+        )
 
     @property
     def residual(self) -> np.ndarray:
@@ -210,11 +260,13 @@ def evaluate(
     n_parameters: int | None = None,
     success: bool = True,
     message: str = "",
+    outcome: FitOutcome = FitOutcome.CONVERGED,
 ) -> FitResult:
     """The model as it is against the data (no fitting).
 
     ``n_parameters`` is what the information criteria count (default ``len(free)``);
     give the model's number of adjustable parameters to compare it with refitted ones.
+    ``success``, ``message`` and ``outcome`` say how a fit that ends here ended.
     """
     method = resolve_method(method, model, data)
     w = _channel_weights(data, weights)
@@ -242,11 +294,20 @@ def evaluate(
         n_residuals=n,
         success=success,
         message=message,
+        outcome=outcome,
     )
 
 
 # --------------------------------------------------------------------------
 # Parameters
+
+
+def _scaled_parameters(effect: str) -> tuple[str, ...]:
+    """A hysteretic (Jenkins) element's shape parameter names, which its coefficient
+    scales all alike: ``c·Jenkins(x; k_t, F_s) = Jenkins(x; c·k_t, c·F_s)``; empty for
+    every other effect."""
+    spec = CATALOGUE[effect]
+    return tuple(f"{effect}.{shape}" for shape in spec.shape) if spec.hysteretic else ()
 
 
 def default_free(model: JointModel) -> list[str]:
@@ -256,7 +317,10 @@ def default_free(model: JointModel) -> list[str]:
     free the coefficient is redundant, so it stays fixed (usually at 1).
     """
     names = model.parameter_names
-    return [n for n in names if not (n == "microslip" and "microslip.k_t" in names)]
+    return [
+        n for n in names
+        if not (n in CATALOGUE and set(_scaled_parameters(n)) & set(names))
+    ]  # fmt: skip
 
 
 def _checked_free(model: JointModel, free: Sequence[str] | None) -> list[str]:
@@ -268,11 +332,13 @@ def _checked_free(model: JointModel, free: Sequence[str] | None) -> list[str]:
         raise ValueError(f"unknown parameter(s) {unknown}; the model has {model.parameter_names}")
     if len(set(free)) != len(free):
         raise ValueError(f"free parameters repeat: {free}")
-    if {"microslip", "microslip.k_t", "microslip.F_s"} <= set(free):
-        raise ValueError(
-            "microslip's coefficient, k_t and F_s cannot all be free: c·Jenkins(k_t, F_s) = "
-            "Jenkins(c·k_t, c·F_s); leave the coefficient out"
-        )
+    for effect in model.effects:
+        scaled = _scaled_parameters(effect)
+        if scaled and {effect, *scaled} <= set(free):
+            raise ValueError(
+                f"{effect}'s coefficient, {' and '.join(CATALOGUE[effect].shape)} cannot all "
+                "be free: c·Jenkins(k_t, F_s) = Jenkins(c·k_t, c·F_s); leave the coefficient out"
+            )
     return free
 
 
@@ -369,8 +435,9 @@ def _linear_start(
     def solved(term) -> bool:
         if CATALOGUE[term.effect].parity == "even":
             return False  # no single-harmonic signature
-        if term.effect == "microslip":
-            return bool(free_set & {"microslip", "microslip.k_t", "microslip.F_s"})
+        scaled = _scaled_parameters(term.effect)
+        if scaled:
+            return bool(free_set & {term.effect, *scaled})
         return term.effect in free_set
 
     best_cost, best_model = np.inf, model
@@ -404,15 +471,15 @@ def _linear_start(
         cost = float(np.sum((matrix @ solution - rhs) ** 2))
         values = {}
         for term, c in zip(unknown, solution, strict=True):
-            if term.effect == "microslip" and "microslip" not in free_set:
+            if _scaled_parameters(term.effect) and term.effect not in free_set:
                 scale = c / (term.coefficient if term.coefficient != 0 else 1.0)
                 if not scale > 0:
                     cost = np.inf  # a Jenkins element cannot stiffen with amplitude
                     break
-                values["microslip.k_t"] = scale * term.shape["k_t"]
-                values["microslip.F_s"] = scale * term.shape["F_s"]
+                for shape in CATALOGUE[term.effect].shape:
+                    values[f"{term.effect}.{shape}"] = scale * term.shape[shape]
                 if term.coefficient == 0:
-                    values["microslip"] = 1.0
+                    values[term.effect] = 1.0
             else:
                 values[term.effect] = c
         if cost < best_cost:
@@ -475,7 +542,8 @@ def fit_backbones(
         e.g. ``{"damping_ratio": 0}`` fits the frequency alone, as the paper does.
     shape_scan
         Grids of shape parameters for the start, by parameter name
-        (``{"microslip.F_s": [...]}``); the product of the grids is scanned.
+        (``{"<effect>.<shape>": [...]}``, e.g. the slip force of microslip); the product
+        of the grids is scanned.
     noise_floor
         Overrides of :data:`NOISE_FLOOR`.
     per_curve
@@ -592,9 +660,16 @@ def _refine(
     relative_step = 1e-6 if method == "multi" else np.sqrt(np.finfo(float).eps)
 
     last: dict[str, np.ndarray] = {}
+    best: dict[str, np.ndarray] = {"u": np.zeros(len(free))}
 
     def residual(u: np.ndarray) -> np.ndarray:
+        if not np.isfinite(u).all():
+            raise _NoPeriodicSolution  # a step computed from an overflowed Jacobian
         last["u"], last["r"] = u.copy(), residuals(u[None])[0]
+        with np.errstate(over="ignore"):
+            cost = float(last["r"] @ last["r"])
+        if np.isfinite(cost) and cost < best.get("cost", np.inf):
+            best["u"], best["cost"] = u.copy(), cost
         return last["r"]
 
     def jacobian(u: np.ndarray) -> np.ndarray:
@@ -606,7 +681,11 @@ def _refine(
         step = np.where(u + step > upper, -step, step)  # one-sided the other way at a bound
         step = (u + step) - u
         at_u = last["r"] if np.array_equal(last.get("u"), u) else residuals(u[None])[0]
-        return ((residuals(u + np.diag(step)) - at_u) / step[:, None]).T
+        with np.errstate(over="ignore", invalid="ignore"):
+            columns = (residuals(u + np.diag(step)) - at_u) / step[:, None]
+        if not np.isfinite(columns).all():
+            raise _NoPeriodicSolution
+        return columns.T
 
     costs: list[float] = []
 
@@ -622,18 +701,35 @@ def _refine(
     # BLAS threads on these tiny matrices only spin, taking the core the
     # harmonic-balance threads need.
     with threadpool_limits(1, user_api="blas"):
-        solution = least_squares(
-            residual,
-            np.zeros(len(free)),
-            jac=jacobian,
-            bounds=(lower, upper),
-            x_scale="jac",
-            ftol=1e-10,
-            xtol=1e-10,
-            gtol=1e-10,
-            max_nfev=60 * (len(free) + 1),
-            callback=stop_when_stalled,
-        )
+        try:
+            solution = least_squares(
+                residual,
+                np.zeros(len(free)),
+                jac=jacobian,
+                bounds=(lower, upper),
+                x_scale="jac",
+                ftol=1e-10,
+                xtol=1e-10,
+                gtol=1e-10,
+                max_nfev=60 * (len(free) + 1),
+                callback=stop_when_stalled,
+            )
+        except (_NoPeriodicSolution, ValueError) as error:
+            # scipy refuses a Jacobian whose entries overflowed ("array must not contain
+            # infs or NaNs"): the prediction left every periodic solution behind there.
+            if not isinstance(error, _NoPeriodicSolution) and "infs or NaNs" not in str(error):
+                raise
+            solution = None
+    if solution is not None and not np.isfinite(solution.cost):
+        solution = None  # it never left a start whose response is absurd
+    if solution is None:
+        # A named outcome, not a traceback: the best model the optimiser could evaluate.
+        fitted = start.with_parameters(dict(zip(free, values(best["u"]), strict=True)))
+        return evaluate(
+            fitted, data, method=method, weights=weight_map, free=free, success=False,
+            message="met parameters without a periodic solution at some measured amplitudes",
+            outcome=FitOutcome.NO_PERIODIC_SOLUTION,
+        )  # fmt: skip
     stalled = solution.status == -2
     fitted = start.with_parameters(dict(zip(free, values(solution.x), strict=True)))
     return evaluate(
@@ -641,4 +737,10 @@ def _refine(
         success=bool(solution.success or stalled),
         message=f"stalled: AIC/BIC moved < {STALL_IC} in {STALL_ITERATIONS} iterations"
         if stalled else str(solution.message),
+        outcome=FitOutcome.STALLED if stalled else FitOutcome.CONVERGED if solution.success
+        else FitOutcome.NOT_CONVERGED,
     )  # fmt: skip
+
+
+class _NoPeriodicSolution(Exception):
+    """The optimiser met parameters whose prediction is not finite (no periodic solution)."""
