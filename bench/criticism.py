@@ -29,7 +29,7 @@ would say nothing).
 ``--fdr N``: N fast null campaigns (harmonic-balance assemblies, 1/3/5/10 curves, five
 truths, per-assembly parameter scatter and noise, 5–8 levels; each drawing levels
 stepped up and down, a distorting shaker and the controller ripple's leak with
-probability ½: :data:`pm_joint.studies.NULL_CONDITIONS`), each through the whole
+probability ½: :data:`studies.NULL_CONDITIONS`), each through the whole
 decision: the false-discovery rate with its Clopper–Pearson interval, per curve count
 and condition, beside the baseline of textbook χ² thresholds on the same campaigns.
 Target ≤ 5 % per decision (α = 1 %), in ≤ 20 min for 200 campaigns.
@@ -65,10 +65,12 @@ from identification.rig import (
     RIG_PRESETS,
     Rig,
 )
-from pm_joint.studies import (
+from studies import (
     NULL_CONDITIONS,
+    NullRow,
     clopper_pearson,
     criticism_study,
+    is_discovery,
     null_study,
     rows_table,
 )
@@ -93,7 +95,7 @@ STUDY_COLUMNS = (
     "scenario", "kind", "start", "seed", "verdict", "ranked_first", "groups", "added",
     "explained_share", "threshold", "passed", "outcome", "seconds",
 )  # fmt: skip
-#: Outcomes of a hidden-effect row (:attr:`pm_joint.studies.StudyResult.outcome`).
+#: Outcomes of a hidden-effect row (:attr:`studies.StudyResult.outcome`).
 OUTCOMES = ("hit", "hit (start term swapped)", "hit (start term group)", "miss", "start adequate")
 HITS = ("hit", "hit (start term swapped)", "hit (start term group)")
 
@@ -204,7 +206,7 @@ def study(scenarios, seeds: int, starts, assemblies: int, levels: int, rows_file
     figures = {
         "false_discoveries": _rate(
             "null scenarios with something proposed",
-            sum(r["verdict"] not in ("nothing missing", "drift") for r in null), len(null),
+            sum(is_discovery(r["verdict"]) for r in null), len(null),
         ),
         "hidden_hits": _rate("hidden effects found (first, in a flagged group or in a "
                              "model-term group of the start) and key error down ≥ 80 %, of "
@@ -276,40 +278,36 @@ def _group_sizes(rows: list[dict]) -> dict[str, dict[int, int]]:
     return out
 
 
-def _naive_fires(row: dict) -> bool:
-    """The baseline: the same two tests with textbook χ² thresholds at ``ALPHA / 2`` each,
+def _naive_fires(row: NullRow, alpha: float) -> bool:
+    """The baseline: the same two tests with textbook χ² thresholds at ``alpha / 2`` each,
     taking the estimated covariance as the truth and ignoring the search over candidates."""
-    catalogue = chi2.isf(row["alpha"] / 2, 1)
-    reference = chi2.isf(row["alpha"] / 2, row["reference_dof"]) if row["reference_dof"] else np.inf
-    return row["catalogue_gain"] > catalogue or row["reference_gain"] > reference
+    catalogue = chi2.isf(alpha / 2, 1)
+    reference = chi2.isf(alpha / 2, row.reference_dof) if row.reference_dof else np.inf
+    return row.catalogue_gain > catalogue or row.reference_gain > reference
 
 
 def fdr(campaigns: int, seed: int, alpha: float = ALPHA, floors: bool = True) -> dict:
     began = time.perf_counter()
 
-    def progress(row: dict) -> None:
+    def progress(row: NullRow) -> None:
         print(rows_table([row], FDR_COLUMNS).splitlines()[-1], flush=True)
 
     options = {} if floors else {"noise_floor": NO_FLOOR}
     rows = null_study(campaigns, seed=seed, progress=progress, alpha=alpha, **options)
     print(rows_table(rows, FDR_COLUMNS))
     overall = _rate("false discoveries (bootstrap-calibrated decision)",
-                    sum(r["false_discovery"] for r in rows), len(rows))  # fmt: skip
+                    sum(r.false_discovery for r in rows), len(rows))  # fmt: skip
     per_count = {}
-    for n in sorted({r["n_curves"] for r in rows}):
-        some = [r for r in rows if r["n_curves"] == n]
-        per_count[n] = _rate(f"  with {n} curves", sum(r["false_discovery"] for r in some),
+    for n in sorted({r.n_curves for r in rows}):
+        some = [r for r in rows if r.n_curves == n]
+        per_count[n] = _rate(f"  with {n} curves", sum(r.false_discovery for r in some),
                              len(some))  # fmt: skip
     per_condition = {}
     for name in ("clean", *NULL_CONDITIONS):
-        some = [
-            r
-            for r in rows
-            if (name in r["conditions"]) or (name == "clean" and not r["conditions"])
-        ]
-        per_condition[name] = _rate(f"  {name}", sum(r["false_discovery"] for r in some),
+        some = [r for r in rows if (name in r.conditions) or (name == "clean" and not r.conditions)]
+        per_condition[name] = _rate(f"  {name}", sum(r.false_discovery for r in some),
                                     len(some))  # fmt: skip
-    naive_count = int(sum(_naive_fires({**r, "alpha": alpha}) for r in rows))
+    naive_count = int(sum(_naive_fires(r, alpha) for r in rows))
     naive = _rate("baseline: textbook χ² thresholds, estimated covariance taken as the truth",
                   naive_count, len(rows))  # fmt: skip
     total_s = time.perf_counter() - began

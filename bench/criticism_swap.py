@@ -6,7 +6,7 @@ The swap step of the forward-backward loop
 earlier when a replacement gains more than :data:`~identification.criticism.criticism.
 SEPARATION` in ``χ²`` (admissible, no channel worse beyond its noise:
 :data:`~identification.criticism.criticism.WORSE`), and removes it when removing it
-costs less than the calibrated threshold. :func:`pm_joint.studies.swap_study` runs it
+costs less than the calibrated threshold. :func:`studies.swap_study` runs it
 over fast harmonic-balance campaigns (the null study's: 1/3/5/10 assemblies, 5–8
 levels, lab conditions each with probability ½) of nine truths, each the lab base model
 plus one effect with a near-collinear rival in the catalogue:
@@ -42,7 +42,7 @@ from criticism import NO_FLOOR  # bench/criticism.py, beside this script
 from criticism import _rate as _interval
 
 from identification.criticism.criticism import SEPARATION, WORSE
-from pm_joint.studies import SWAP_TRUTHS, rows_table, swap_study
+from studies import SWAP_TRUTHS, SwapRow, rows_table, swap_study
 
 TARGET_RATE = 0.05
 COLUMNS = (
@@ -56,8 +56,8 @@ def _rate(name: str, k: int, n: int) -> dict:
     return _interval(name, k, n) | {"rate": k / n if n else None}
 
 
-def _run(campaigns: int, seed: int, wrong_first: bool, options: dict) -> list[dict]:
-    def progress(row: dict) -> None:
+def _run(campaigns: int, seed: int, wrong_first: bool, options: dict) -> list[SwapRow]:
+    def progress(row: SwapRow) -> None:
         print(rows_table([row], COLUMNS).splitlines()[-1], flush=True)
 
     rows = swap_study(campaigns, wrong_first=wrong_first, seed=seed, progress=progress, **options)
@@ -69,21 +69,21 @@ def _run(campaigns: int, seed: int, wrong_first: bool, options: dict) -> list[di
 SWEEP_MARGINS = (0.0, 0.25, 0.5, 1.0, 2.0, 4.0, SEPARATION)
 
 
-def _replacement(row: dict, margin: float) -> str | None:
+def _replacement(row: SwapRow, margin: float) -> str | None:
     """The replacement the swap step keeps at ``margin``: the best admissible trial, no
     channel worse, gaining more (each trial's gain and vetoes do not depend on it)."""
-    ok = [t for t in row["trials"] if t["add"] and not t["why"] and t["delta_chi2"] > margin]
-    return max(ok, key=lambda t: t["delta_chi2"])["add"] if ok else None
+    ok = [t for t in row.trials if t.add and not t.why and t.delta_chi2 > margin]
+    return max(ok, key=lambda t: t.delta_chi2).add if ok else None
 
 
-def _sweep(right: list[dict], wrong: list[dict]) -> dict:
+def _sweep(right: list[SwapRow], wrong: list[SwapRow]) -> dict:
     """False replacements and true swaps had the margin been each of :data:`SWEEP_MARGINS`
     (removals are the calibrated threshold's and unchanged)."""
     print("\nthe margin swept over the same trials (false replacements | true swaps)")
     out = {}
     for margin in SWEEP_MARGINS:
         false = sum(_replacement(r, margin) is not None for r in right)
-        true = sum(_replacement(r, margin) == r["truth"] for r in wrong)
+        true = sum(_replacement(r, margin) == r.truth for r in wrong)
         out[f"{margin:g}"] = {"false_replacements": false, "true_swaps": true}
         print(f"  {margin:>5g}: {false} of {len(right)} | {true} of {len(wrong)}")
     return out
@@ -107,47 +107,46 @@ def main() -> None:
     began = time.perf_counter()
     if args.from_rows:
         with open(args.from_rows) as stored:
-            rows = [json.loads(line) for line in stored if line.strip()]
-        right = [r for r in rows if not r["wrong_first"]]
-        wrong = [r for r in rows if r["wrong_first"]]
+            rows = [SwapRow.from_dict(json.loads(line)) for line in stored if line.strip()]
+        right = [r for r in rows if not r.wrong_first]
+        wrong = [r for r in rows if r.wrong_first]
     else:
         right = _run(args.campaigns, args.seed, False, options) if args.side != "power" else []
         wrong = _run(args.campaigns, args.seed + 1, True, options) if args.side != "false" else []
     total_s = time.perf_counter() - began
     if args.rows:
         with open(args.rows, "w") as out:
-            for side, rows in ((False, right), (True, wrong)):
-                for row in rows:
-                    out.write(json.dumps(row | {"wrong_first": side}, default=str) + "\n")
+            for row in right + wrong:
+                out.write(json.dumps(row.to_dict(), default=str) + "\n")
 
     print("\nfalse swaps (the truth's effect added; any change kept is wrong)")
-    decided = [r for r in right if r["added"] is not None]
-    first = [r for r in decided if r["proposed_first"] == r["truth"]]
+    decided = [r for r in right if r.added is not None]
+    first = [r for r in decided if r.proposed_first == r.truth]
     figures = {
-        "false_swaps": _rate("  any change", sum(r["false_swap"] for r in decided), len(decided)),
+        "false_swaps": _rate("  any change", sum(r.false_swap for r in decided), len(decided)),
         "false_replacements": _rate(
             "  replaced by another effect (SEPARATION)",
-            sum(r["decision"].startswith("replaced") for r in decided), len(decided),
+            sum(r.decision.startswith("replaced") for r in decided), len(decided),
         ),
         "false_removals": _rate(
             "  removed (calibrated threshold)",
-            sum(r["decision"] == "removed" for r in decided), len(decided),
+            sum(r.decision == "removed" for r in decided), len(decided),
         ),
         "false_swaps_when_proposed_first": _rate(
             "  any change, campaigns where round 1 proposed the truth first",
-            sum(r["false_swap"] for r in first), len(first),
+            sum(r.false_swap for r in first), len(first),
         ),
     }  # fmt: skip
     by_truth = {}
     for truth in SWAP_TRUTHS:
-        some = [r for r in decided if r["truth"] == truth]
-        by_truth[truth] = _rate(f"    {truth}", sum(r["false_swap"] for r in some), len(some))
+        some = [r for r in decided if r.truth == truth]
+        by_truth[truth] = _rate(f"    {truth}", sum(r.false_swap for r in some), len(some))
     by_count = {}
-    for n in sorted({r["n_curves"] for r in decided}):
-        some = [r for r in decided if r["n_curves"] == n]
-        by_count[n] = _rate(f"    {n} curves", sum(r["false_swap"] for r in some), len(some))
-    gains = np.array([r["best_replacement_gain"] for r in decided
-                      if r["best_replacement_gain"] is not None])  # fmt: skip
+    for n in sorted({r.n_curves for r in decided}):
+        some = [r for r in decided if r.n_curves == n]
+        by_count[n] = _rate(f"    {n} curves", sum(r.false_swap for r in some), len(some))
+    gains = np.array([r.best_replacement_gain for r in decided
+                      if r.best_replacement_gain is not None])  # fmt: skip
     figures["best_replacement_gain_chi2"] = (
         {
             "campaigns": int(gains.size),
@@ -167,52 +166,52 @@ def main() -> None:
     )
 
     print("\nfalse vetoes (the truth's refit flagged 'worse' beyond its noise)")
-    refitted = [r for r in right + wrong if r["add_worse"] is not None]
+    refitted = [r for r in right + wrong if r.add_worse is not None]
     figures["add_step_false_vetoes"] = _rate(
-        "  add step (round 1, truth refitted)", sum(bool(r["add_worse"]) for r in refitted),
+        "  add step (round 1, truth refitted)", sum(bool(r.add_worse) for r in refitted),
         len(refitted),
     )  # fmt: skip
-    tried = [r for r in wrong if r.get("swap_veto") is not None]
+    tried = [r for r in wrong if r.swap_veto is not None]
     figures["swap_step_false_vetoes"] = _rate(
         "  swap step (trial of the truth in place of a wrong first addition)",
-        sum(r["swap_veto"] for r in tried), len(tried),
+        sum(r.swap_veto for r in tried), len(tried),
     )  # fmt: skip
 
     print("\ntrue swaps (round 1's runner-up added instead of the truth)")
-    wrong_decided = [r for r in wrong if r["added"] is not None]
+    wrong_decided = [r for r in wrong if r.added is not None]
     figures["true_swaps"] = _rate(
-        "  truth put in place of the wrong effect", sum(r["corrected"] for r in wrong_decided),
+        "  truth put in place of the wrong effect", sum(r.corrected for r in wrong_decided),
         len(wrong_decided),
     )  # fmt: skip
-    offered = [r for r in wrong_decided if r["truth"] in r["alternatives"]]
+    offered = [r for r in wrong_decided if r.truth in r.alternatives]
     figures["true_swaps_truth_offered"] = _rate(
         "  the same, campaigns where the truth is among the alternatives",
-        sum(r["corrected"] for r in offered), len(offered),
+        sum(r.corrected for r in offered), len(offered),
     )  # fmt: skip
-    separated = [r for r in offered if any(t["add"] == r["truth"] and t["delta_chi2"] > SEPARATION
-                                          for t in r["trials"])]  # fmt: skip
+    separated = [r for r in offered if any(t.add == r.truth and t.delta_chi2 > SEPARATION
+                                          for t in r.trials)]  # fmt: skip
     figures["true_swaps_truth_separated"] = _rate(
         f"  the same, campaigns where the truth gains more than SEPARATION = {SEPARATION}",
-        sum(r["corrected"] for r in separated), len(separated),
+        sum(r.corrected for r in separated), len(separated),
     )  # fmt: skip
-    proposable = [r for r in wrong_decided if r.get("added_was_proposed")]
+    proposable = [r for r in wrong_decided if r.added_was_proposed]
     figures["true_swaps_added_was_proposed"] = _rate(
         "  the same, campaigns where round 1 proposed the wrong effect (the loop's mistake)",
-        sum(r["corrected"] for r in proposable), len(proposable),
+        sum(r.corrected for r in proposable), len(proposable),
     )  # fmt: skip
-    grouped = [r for r in wrong_decided if not r["corrected"] and "groups" in r]
+    grouped = [r for r in wrong_decided if not r.corrected and r.groups is not None]
     figures["uncorrected_truth_grouped_with_added"] = _rate(
         "  of those not corrected, round 1 flagged the truth and the effect added as one group",
-        sum(any({r["truth"], r["added"]} <= set(g) for g in r["groups"]) for r in grouped),
+        sum(any({r.truth, r.added} <= set(g) for g in r.groups) for r in grouped),
         len(grouped),
     )  # fmt: skip
-    mistakes = [r for r in grouped if r.get("added_was_proposed")]
+    mistakes = [r for r in grouped if r.added_was_proposed]
     figures["uncorrected_mistakes_grouped_with_truth"] = _rate(
         "  of the loop's mistakes not corrected, flagged as one group with the truth",
-        sum(any({r["truth"], r["added"]} <= set(g) for g in r["groups"]) for r in mistakes),
+        sum(any({r.truth, r.added} <= set(g) for g in r.groups) for r in mistakes),
         len(mistakes),
     )  # fmt: skip
-    power_by_pair = Counter((r["truth"], r["added"], r["decision"]) for r in wrong_decided)
+    power_by_pair = Counter((r.truth, r.added, r.decision) for r in wrong_decided)
     for (truth, added, decision), n in sorted(power_by_pair.items()):
         print(f"    truth {truth}, added {added}: {decision} × {n}")
     figures["margin_sweep_chi2"] = _sweep(decided, wrong_decided)

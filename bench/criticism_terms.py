@@ -5,7 +5,7 @@ A model-term group (:attr:`identification.criticism.criticism.Criticism.term_gro
 says that a term the data need could be a catalogue effect the model lacks: that effect,
 refitted in the term's place, fits no worse than
 :data:`~identification.criticism.criticism.SEPARATION` below the model, is admissible and
-makes no channel worse beyond its noise. :func:`pm_joint.studies.term_group_study` runs it
+makes no channel worse beyond its noise. :func:`studies.term_group_study` runs it
 over fast harmonic-balance campaigns (the null study's: 1/3/5/10 assemblies, 5–8 levels,
 lab conditions each with probability ½) of eleven truths, each the lab base model plus one
 effect with near-collinear catalogue rivals, criticised with the truth's own structure.
@@ -36,7 +36,7 @@ from criticism import _rate  # bench/criticism.py, beside this script
 from scipy.stats import ncx2
 
 from identification.criticism.criticism import SEPARATION
-from pm_joint.studies import TERM_TRUTHS, rows_table, term_group_study
+from studies import TERM_TRUTHS, TermGroupRow, TermTrial, rows_table, term_group_study
 
 COLUMNS = ("campaign", "truth", "n_curves", "term", "effect", "delta_chi2", "lambda", "standing",
            "why")  # fmt: skip
@@ -44,20 +44,26 @@ COLUMNS = ("campaign", "truth", "n_curves", "term", "effect", "delta_chi2", "lam
 BANDS = ((1, 2), (2, 4), (4, np.inf))
 
 
-def _trials(rows: list[dict]) -> list[dict]:
-    """Every stand-in trial of every campaign, with its campaign's fields."""
-    return [
-        {"campaign": r["campaign"], "truth": r["truth"], "n_curves": r["n_curves"], **t}
-        for r in rows
-        for t in r["trials"]
-        if t["effect"] is not None
+def _trials(rows: list[TermGroupRow]) -> list[tuple[TermGroupRow, TermTrial]]:
+    """Every stand-in trial of every campaign, beside its campaign's row."""
+    return [(r, t) for r in rows for t in r.trials if t.effect is not None]
+
+
+def _table(trials: list[tuple[TermGroupRow, TermTrial]]) -> str:
+    """The trials as a table, each with its campaign's fields."""
+    rows = [
+        {"campaign": r.campaign, "truth": r.truth, "n_curves": r.n_curves, **t.to_dict()}
+        for r, t in trials
     ]
+    return rows_table(rows, COLUMNS)
 
 
-def _predicted(trials: list[dict]) -> float:
+def _predicted(trials: list[TermTrial]) -> float:
     """Mean probability that the ``Δχ²`` rule alone groups a trial of separation λ: a
     noncentral χ²₁(λ) below SEPARATION."""
-    return float(np.mean([ncx2.cdf(SEPARATION, 1, t["lambda"]) for t in trials])) if trials else 0.0
+    if not trials:
+        return 0.0
+    return float(np.mean([ncx2.cdf(SEPARATION, 1, t.design_lambda) for t in trials]))
 
 
 def main() -> None:
@@ -68,25 +74,26 @@ def main() -> None:
     args = parser.parse_args()
     began = time.perf_counter()
 
-    def progress(row: dict) -> None:
+    def progress(row: TermGroupRow) -> None:
         trials = _trials([row])
-        line = f"campaign {row['campaign']} {row['truth']} ({row['n_curves']} curves): "
-        line += f"{row['verdict']}, {len(trials)} trials, groups {row['term_groups']}, "
-        print(line + f"{row['seconds']:.1f} s", flush=True)
+        groups = [list(g) for g in row.term_groups]
+        line = f"campaign {row.campaign} {row.truth} ({row.n_curves} curves): "
+        line += f"{row.verdict}, {len(trials)} trials, groups {groups}, "
+        print(line + f"{row.seconds:.1f} s", flush=True)
 
     rows = term_group_study(args.campaigns, seed=args.seed, progress=progress)
     total_s = time.perf_counter() - began
     if args.rows:
         with open(args.rows, "w") as out:
             for row in rows:
-                out.write(json.dumps(row, default=str) + "\n")
-    trials = _trials(rows)
-    print(rows_table(trials, COLUMNS))
-    separable = [t for t in trials if t["lambda"] >= SEPARATION]
-    close = [t for t in trials if t["lambda"] < SEPARATION]
+                out.write(json.dumps(row.to_dict(), default=str) + "\n")
+    print(_table(_trials(rows)))
+    trials = [t for _, t in _trials(rows)]
+    separable = [t for t in trials if t.design_lambda >= SEPARATION]
+    close = [t for t in trials if t.design_lambda < SEPARATION]
     print(f"\n{len(trials)} stand-in trials in {len(rows)} campaigns; separation at the design "
           f"λ ≥ {SEPARATION} (the data can tell them apart) in {len(separable)}")  # fmt: skip
-    flagged = sum(t["standing"] for t in separable)
+    flagged = sum(t.standing for t in separable)
     figures = {
         "false_flags": _rate(
             "false flags: grouped although λ ≥ SEPARATION", flagged, len(separable)
@@ -95,31 +102,31 @@ def main() -> None:
         "by_band": {},
     }
     for low, high in BANDS:
-        some = [t for t in separable if low * SEPARATION <= t["lambda"] < high * SEPARATION]
-        count = sum(t["standing"] for t in some)
+        some = [t for t in separable if low * SEPARATION <= t.design_lambda < high * SEPARATION]
+        count = sum(t.standing for t in some)
         band = _rate(f"  λ in [{low}, {high})·SEPARATION", count, len(some))
         figures["by_band"][f"{low}-{high}x SEPARATION"] = band | {
             "predicted_by_delta_chi2_rule": _predicted(some)
         }
         print(f"    Δχ² rule alone (noncentral χ²₁): {100 * _predicted(some):.1f} %")
     right = "grouped where λ < SEPARATION (the data cannot tell them apart: the statement is right)"
-    figures["grouped_when_close"] = _rate(right, sum(t["standing"] for t in close), len(close))
-    vetoed_close = sum(bool(t["why"]) for t in close)
+    figures["grouped_when_close"] = _rate(right, sum(t.standing for t in close), len(close))
+    vetoed_close = sum(bool(t.why) for t in close)
     print(f"  of those not grouped: {vetoed_close} inadmissible or a channel worse")
     # The term swap's false replacements (Criticism.swap_term): a stand-in the data prefer to
     # a true term — admissible, no channel worse, better by more than SEPARATION.
-    preferred = sum(not t["why"] and t["delta_chi2"] > SEPARATION for t in trials)
+    preferred = sum(not t.why and t.delta_chi2 > SEPARATION for t in trials)
     figures["preferred_over_true_term"] = _rate(
         "stand-ins preferred to a true term (the term swap would replace it)",
         preferred,
         len(trials),
     )
-    proposed = sum(r["false_discovery"] for r in rows)
+    proposed = sum(r.false_discovery for r in rows)
     null = "campaigns with something proposed (each a null campaign for its truth's structure)"
     figures["null_verdicts"] = _rate(null, proposed, len(rows))
-    sizes = Counter(len(g) for r in rows for g in r["term_groups"])
+    sizes = Counter(len(g) for r in rows for g in r.term_groups)
     print(f"model-term group sizes (the term and its stand-ins): {dict(sorted(sizes.items()))}")
-    max_truth = max(abs(r["lambda_truth"]) for r in rows)
+    max_truth = max(abs(r.lambda_truth) for r in rows)
     print(f"the truth's structure on its noise-free twin: χ² ≤ {max_truth:.2g}")
     print(f"{len(rows)} campaigns in {total_s:.0f} s, load {os.getloadavg()}")
     print(json.dumps({

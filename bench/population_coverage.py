@@ -1,6 +1,6 @@
 """Benchmark: calibration of the hierarchical population model on PLL-simulated campaigns.
 
-Simulation-based calibration (:func:`pm_joint.studies.population_coverage`):
+Simulation-based calibration (:func:`studies.population_coverage`):
 each campaign draws its population from the model's own prior (log-means
 ``N(0, 0.05)``, log-spreads ``HalfNormal(0.1)``) for the four coefficients
 the ``trc-like`` rig varies most (linear and cubic stiffness, viscous damping,
@@ -32,7 +32,7 @@ import numpy as np
 
 from identification.analytical.pll import pll_backbones
 from identification.rig import RIG_PRESETS, Rig
-from pm_joint.studies import population_coverage
+from studies import population_coverage
 
 NAMES = ["linear_stiffness", "cubic_stiffness", "viscous_damping", "microslip.F_s"]
 

@@ -58,8 +58,8 @@ from identification.measurements.backbone import BackboneSet
 from identification.model import JointModel, parameter_bounds
 from pm_joint import pipeline
 from pm_joint.demo import DEMO_LIBRARY, SURROGATE_SPREAD
-from pm_joint.studies import table5_study
 from pm_joint.workspace import Workspace
+from studies import table5_study
 from surrogates.dataset import add_measured, generate_dataset
 from surrogates.evaluate import PAPER_TABLE5, TARGETS
 from surrogates.export import export_surrogate
@@ -465,7 +465,7 @@ def main() -> None:
             data, sizes=sizes, config=table5_config, seed=args.seed, scatter=scatter
         )
         print(
-            f"\nTable 5 on the demo box (test split of {table5[0]['n_test']} analytical curves"
+            f"\nTable 5 on the demo box (test split of {table5[0].n_test} analytical curves"
             f"{f', epochs capped at {args.table5_epochs}' if capped else ''}; amplitudes at "
             "excitation levels by inverting the base-acceleration channel)"
         )
@@ -474,13 +474,13 @@ def main() -> None:
             f"{'MSE mm²':>11s}{'paper':>10s}{'train s':>9s}"
         )
         for row in table5:
-            paper = PAPER_TABLE5.get(row["n_train"], (np.nan,))[0]
+            paper = PAPER_TABLE5.get(row.n_train, (np.nan,))[0]
             print(
-                f"{row['n_train']:>7d}{row['rmse_frequency_hz']:>11.4g}"
-                f"{row['rmse_frequency_hz_linear']:>9.4g}{row['frequency_to_linear']:>9.3g}"
-                f"{row['frequency_to_scatter_max'] or np.nan:>10.3g}"
-                f"{row['mse_amplitude_mm2'] or np.nan:>11.3g}{paper:>10.3g}"
-                f"{row['train_s']:>9.0f}"
+                f"{row.n_train:>7d}{row.rmse_frequency_hz:>11.4g}"
+                f"{row.rmse_frequency_hz_linear:>9.4g}{row.frequency_to_linear:>9.3g}"
+                f"{row.frequency_to_scatter_max or np.nan:>10.3g}"
+                f"{row.mse_amplitude_mm2 or np.nan:>11.3g}{paper:>10.3g}"
+                f"{row.train_s:>9.0f}"
             )
 
     summary = {}
@@ -525,7 +525,7 @@ def main() -> None:
                 },
                 "grid": {**grid.to_dict(), "amplitudes_m": grid.amplitudes_m.tolist()},
                 "boxes": results,
-                "table5": table5,
+                "table5": [row.to_dict() for row in table5],
                 "table5_epoch_cap": args.table5_epochs or None,
                 "targets": {**TARGETS, **SPEED_TARGETS},
                 "paper": {**PAPER, "table5": {str(k): v for k, v in PAPER_TABLE5.items()}},

@@ -33,7 +33,7 @@ import matplotlib.pyplot as plt
 
 from identification.criticism.plots import plot_comparison, plot_history
 from identification.rig import RIG_PRESETS
-from pm_joint.studies import criticism_study
+from studies import criticism_study
 
 SMALL = os.environ.get("PM_JOINT_SIZE") == "small"
 OUT = os.environ.get("PM_JOINT_OUT", "case_study_output")

@@ -27,7 +27,7 @@ from identification.criticism.criticism import criticize
 from identification.fitting import covariance as cov
 from identification.fitting.data import Metric
 from identification.model import JointModel
-from pm_joint.studies import simulated_campaign
+from studies import simulated_campaign
 
 W0 = 2 * np.pi * 101.0
 MODEL = JointModel({"linear_stiffness": W0**2, "viscous_damping": 2 * 0.003 * W0})

@@ -28,7 +28,7 @@ from identification.rig import (
     LAB_OUT_OF_CATALOGUE_SCENARIOS,
 )
 from pm_joint.analysis.posterior import criticize as criticize_posterior
-from pm_joint.studies import KEY_CHANNEL, StudyResult, criticism_study, simulated_campaign
+from studies import KEY_CHANNEL, StudyResult, criticism_study, simulated_campaign
 
 W0 = 2 * np.pi * 101.0
 K0 = W0**2

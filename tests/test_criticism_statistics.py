@@ -16,7 +16,7 @@ from identification.criticism.drift import branch_drift
 from identification.fitting.data import fit_data
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.model import JointModel
-from pm_joint.studies import (
+from studies import (
     binomial_bounds,
     clopper_pearson,
     null_study,
@@ -46,11 +46,11 @@ def test_null_campaigns_find_nothing_and_the_bootstrap_is_not_anticonservative()
     give at most 5 false discoveries unless it is anti-conservative (P(X ≥ 6) = 0.1 % at
     the nominal 20 %). The full count is the slow test and ``bench/criticism.py``."""
     rows = null_study(5, curve_counts=(1, 3), n_bootstrap=500, seed=11)
-    assert sum(r["false_discovery"] for r in rows) == 0, rows
+    assert sum(r.false_discovery for r in rows) == 0, rows
     tiny = {"frequency_hz": 1e-6, "damping_ratio": 1e-9, "harmonics": 1e-7}
     rows = null_study(8, curve_counts=(1, 3), n_bootstrap=250, seed=12, alpha=0.2,
                       noise_floor=tiny)  # fmt: skip
-    assert sum(r["false_discovery"] for r in rows) <= 5, rows
+    assert sum(r.false_discovery for r in rows) <= 5, rows
 
 
 def test_clopper_pearson_matches_the_beta_quantiles():
@@ -74,15 +74,15 @@ def test_the_swap_step_keeps_coulomb_friction_beside_the_stribeck_law_that_nests
     rows = swap_study(
         8, truths=("coulomb_friction",), curve_counts=(3, 5), n_bootstrap=500, seed=31
     )
-    assert all(r["added"] == "coulomb_friction" for r in rows)
-    assert all("stribeck_friction" in r["alternatives"] for r in rows), rows
-    assert sum(r["false_swap"] for r in rows) <= binomial_bounds(8, 0.05, level=0.98)[1], rows
+    assert all(r.added == "coulomb_friction" for r in rows)
+    assert all("stribeck_friction" in r.alternatives for r in rows), rows
+    assert sum(r.false_swap for r in rows) <= binomial_bounds(8, 0.05, level=0.98)[1], rows
 
 
 @pytest.mark.slow
 def test_false_discovery_rate_over_sixty_null_campaigns():
     rows = null_study(60, seed=21)
-    k = sum(r["false_discovery"] for r in rows)
+    k = sum(r.false_discovery for r in rows)
     assert clopper_pearson(k, len(rows))[0] <= 0.05, rows
 
 

@@ -13,7 +13,7 @@ from identification.criticism.criticism import criticize
 from identification.fitting.least_squares import fit_backbones
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS
-from pm_joint.studies import StudyResult, simulated_campaign
+from studies import StudyResult, simulated_campaign
 
 W0 = 2 * np.pi * 101.0
 K0 = W0**2

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 import torch
 
-from pm_joint.studies import table5_study
+from studies import table5_study
 from surrogates.dataset import BackboneDataset
 from surrogates.evaluate import PAPER_TABLE5, backbone_metrics
 from surrogates.export import export_surrogate
@@ -355,12 +355,12 @@ def test_table5_study_rows_carry_the_papers_figures():
     ).with_splits(0.1, 0.1)  # fmt: skip
     config = TrainingConfig(net=TINY, max_epochs=2, finetune_epochs=0, progress=False)
     rows = table5_study(data, sizes=(150, 200), config=config)
-    assert [r["n_train"] for r in rows] == [150, 200]
-    assert all(r["n_validation"] == 26 and r["n_test"] == 26 for r in rows)
-    assert rows[0]["paper_mse"] is None
-    assert (rows[1]["paper_mse"], rows[1]["paper_mae"], rows[1]["paper_mape"]) == PAPER_TABLE5[200]
-    assert all(r["mse_amplitude_mm2"] > 0 and r["rmse_frequency_hz"] > 0 for r in rows)
-    assert all(r["table5_representation"] == "excitation_levels" for r in rows)
+    assert [r.n_train for r in rows] == [150, 200]
+    assert all(r.n_validation == 26 and r.n_test == 26 for r in rows)
+    assert rows[0].paper_mse is None
+    assert (rows[1].paper_mse, rows[1].paper_mae, rows[1].paper_mape) == PAPER_TABLE5[200]
+    assert all(r.mse_amplitude_mm2 > 0 and r.rmse_frequency_hz > 0 for r in rows)
+    assert all(r.table5_representation == "excitation_levels" for r in rows)
     with pytest.raises(ValueError, match="only 208 training curves"):
         table5_study(data, sizes=(209,), config=config)
 

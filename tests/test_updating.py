@@ -49,7 +49,7 @@ from pm_joint.inference.truncation import (
     centred_choice,
     truncation_correction,
 )
-from pm_joint.studies import binomial_bounds, population_coverage, synthetic_campaign
+from studies import binomial_bounds, population_coverage, synthetic_campaign
 from surrogates import (
     NetConfig,
     SurrogateRuntime,

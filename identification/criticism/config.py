@@ -37,7 +37,7 @@ PARTLY = 0.5
 #: Separation statistic (χ²₁, 1 %) below which the data cannot tell two candidates apart;
 #: the ``χ²`` a replacement must gain in the swap step (:class:`~.moves.Swap`), so the
 #: loop does not swap inside what it reports as one group. Its false-swap rate and power
-#: are measured by :func:`pm_joint.studies.swap_study` (``bench/criticism_swap.py``,
+#: are measured by :func:`studies.swap_study` (``bench/criticism_swap.py``,
 #: figures in ``bench/results/criticism_swap_calibration*.json``).
 SEPARATION = 6.63
 #: A channel is made worse beyond its noise when its χ² ends beyond its calibrated bound and

@@ -17,7 +17,7 @@
     predictive draws of new assemblies include the population scatter
     (:func:`pm_joint.analysis.population_predictive`). Sampled with NUTS or
     nutpie through the differentiable harmonic-balance graph;
-    :func:`pm_joint.studies.population_coverage` checks its calibration on
+    :func:`studies.population_coverage` checks its calibration on
     campaigns simulated with the PLL simulator.
 """
 
