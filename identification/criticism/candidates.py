@@ -24,9 +24,8 @@ from identification.criticism.config import (
     SEPARATION,
     CriticismConfig,
 )
-from identification.criticism.decision import Decision
+from identification.criticism.decision import Decision, separation
 from identification.criticism.directions import mean_prediction
-from identification.criticism.groups import separation
 from identification.criticism.readings import _reading
 from identification.criticism.records import Candidate
 from identification.criticism.reference import explained_share

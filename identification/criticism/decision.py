@@ -25,7 +25,7 @@ from identification.criticism.directions import (
     reference_directions,
 )
 from identification.criticism.drift import Drift, branch_drift
-from identification.criticism.records import FailureRange
+from identification.criticism.records import Candidate, FailureRange
 from identification.criticism.reference import FreeForm, fit_reference
 from identification.fitting.data import (
     BACKBONE_CHANNELS,
@@ -38,7 +38,7 @@ from identification.fitting.fitter import Fitter
 from identification.fitting.least_squares import FitResult, default_free
 from identification.model import JointModel
 
-__all__ = ["Decision", "worse"]
+__all__ = ["Decision", "separation", "worse"]
 
 
 class Decision:
@@ -353,3 +353,20 @@ def runs(sign: np.ndarray, min_run: int) -> list[tuple[int, int]]:
         if start is None and value != 0:
             start = i
     return out
+
+
+def separation(decision: Decision, best: Candidate, other: Candidate) -> float:
+    """χ² gain of ``best`` over a model that already has ``other`` (linearised at the
+    base, along their fitted signatures): small when the data cannot tell them apart."""
+    keep, weights = decision.metric.keep, decision.metric.weights
+    columns = np.column_stack(
+        [weights * np.stack(list(c.signature.values()), axis=1).reshape(-1)[keep]
+         for c in (best, other)]
+    )  # fmt: skip
+    columns = np.nan_to_num(columns)
+    projected = cal.project(decision.observed, columns)
+    u, v = projected[:, 0], projected[:, 1]
+    if v @ v > 0:
+        u = u - v * (v @ u) / (v @ v)
+    norm = u @ u
+    return float((u @ decision.observed.frame["z"]) ** 2 / norm) if norm > 0 else 0.0

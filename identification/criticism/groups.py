@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from identification.criticism import calibration as cal
 from identification.criticism.adequacy import NEARBY_MODE
 from identification.criticism.config import (
     LINEAR_PAIR,
@@ -26,9 +25,9 @@ from identification.criticism.config import (
     SEPARATION,
     TERM_OVERLAP,
 )
-from identification.criticism.decision import Decision
+from identification.criticism.decision import Decision, separation
 from identification.criticism.readings import CHANNEL_LABELS
-from identification.criticism.records import Candidate, Group, TermGroup, Trial
+from identification.criticism.records import Group, TermGroup, Trial
 from identification.criticism.refits import Refits
 from identification.criticism.words import separates_nearby_mode
 from identification.fitting.data import BACKBONE_CHANNELS, HARMONIC_ORDERS
@@ -38,24 +37,7 @@ from identification.model import JointModel
 if TYPE_CHECKING:
     from identification.criticism.candidates import Ranking
 
-__all__ = ["Groups", "separation"]
-
-
-def separation(decision: Decision, best: Candidate, other: Candidate) -> float:
-    """χ² gain of ``best`` over a model that already has ``other`` (linearised at the
-    base, along their fitted signatures): small when the data cannot tell them apart."""
-    keep, weights = decision.metric.keep, decision.metric.weights
-    columns = np.column_stack(
-        [weights * np.stack(list(c.signature.values()), axis=1).reshape(-1)[keep]
-         for c in (best, other)]
-    )  # fmt: skip
-    columns = np.nan_to_num(columns)
-    projected = cal.project(decision.observed, columns)
-    u, v = projected[:, 0], projected[:, 1]
-    if v @ v > 0:
-        u = u - v * (v @ u) / (v @ v)
-    norm = u @ u
-    return float((u @ decision.observed.frame["z"]) ** 2 / norm) if norm > 0 else 0.0
+__all__ = ["Groups"]
 
 
 class Groups:
