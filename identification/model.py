@@ -30,9 +30,12 @@ import numpy as np
 from identification.artifacts import atomic_write_text, check_sha256, sha256_json, versions
 from identification.effects import (
     CATALOGUE,
+    LINEAR_STIFFNESS,
     get_effect,
     restoring_force,
 )
+from identification.effects.base import NUMERICAL_SHAPES
+from identification.effects.eq3 import eq3_coefficients
 
 __all__ = ["PRESETS", "JointModel", "Term", "parameter_bounds"]
 
@@ -58,15 +61,13 @@ class Term:
 
     def text(self, precision: int = 4) -> str:
         """The term as it reads in an equation, coefficient included."""
-        term = get_effect(self.effect).term
-        if self.effect == "microslip":
-            k_t, f_s = self.shape["k_t"], self.shape["F_s"]
-            term = f"Jenkins(x; k_t={k_t:.{precision}g}, F_s={f_s:.{precision}g})"
-        else:
-            for name, value in self.shape.items():
-                if name != "v_reg":  # a numerical device, not part of the physics
-                    term = term.replace(name, f"{value:.{precision}g}")
+        term = get_effect(self.effect).term_text(self.shape, precision)
         return f"{abs(self.coefficient):.{precision}g}·{term}"
+
+    @property
+    def hysteretic(self) -> bool:
+        """Whether the term's force depends on the loading history (its state is carried)."""
+        return CATALOGUE[self.effect].hysteretic
 
 
 class JointModel:
@@ -133,16 +134,31 @@ class JointModel:
         return self[effect].coefficient if effect in self else 0.0
 
     @property
+    def stateful_terms(self) -> tuple[Term, ...]:
+        """The hysteretic terms, whose state the integrators carry (catalogue order)."""
+        return tuple(t for t in self.terms if t.hysteretic)
+
+    @property
+    def hysteretic_term(self) -> Term | None:
+        """The model's hysteretic term (the Jenkins element the kernels carry), None if none.
+
+        The catalogue holds one hysteretic effect
+        (:data:`~identification.effects.HYSTERETIC`), so a model holds at most one.
+        """
+        stateful = self.stateful_terms
+        return stateful[0] if stateful else None
+
+    @property
     def has_microslip(self) -> bool:
-        return "microslip" in self
+        """Whether the model has the hysteretic Jenkins element (:attr:`hysteretic_term`)."""
+        return self.hysteretic_term is not None
 
     @property
     def linear_stiffness(self) -> float:
-        """Small-amplitude stiffness (1/s²): linear term plus a sticking Jenkins spring."""
-        k = self.coefficient("linear_stiffness")
-        if self.has_microslip:
-            term = self["microslip"]
-            k += term.coefficient * term.shape["k_t"]
+        """Small-amplitude stiffness (1/s²): linear term plus the stuck hysteretic element."""
+        k = self.coefficient(LINEAR_STIFFNESS)
+        for term in self.stateful_terms:
+            k += CATALOGUE[term.effect].stuck_stiffness(term.coefficient, term.shape)
         return k
 
     @property
@@ -206,7 +222,7 @@ class JointModel:
         names = []
         for t in self.terms:
             names.append(t.effect)
-            names += [f"{t.effect}.{n}" for n in t.shape if n != "v_reg"]
+            names += [f"{t.effect}.{n}" for n in t.shape if n not in NUMERICAL_SHAPES]
         return names
 
     @property
@@ -215,7 +231,9 @@ class JointModel:
         out = {}
         for t in self.terms:
             out[t.effect] = t.coefficient
-            out.update({f"{t.effect}.{n}": v for n, v in t.shape.items() if n != "v_reg"})
+            out.update(
+                {f"{t.effect}.{n}": v for n, v in t.shape.items() if n not in NUMERICAL_SHAPES}
+            )
         return out
 
     # ---------------------------------------------------------------- physics
@@ -223,9 +241,9 @@ class JointModel:
         """``(indices, coefficients, shapes)`` of the memoryless terms for numba kernels.
 
         ``shapes`` has two columns (``p0, p1`` of the force kernels). The
-        ``microslip`` term is excluded; see :meth:`microslip_arrays`.
+        hysteretic term is excluded; see :meth:`microslip_arrays`.
         """
-        memoryless = [t for t in self.terms if t.effect != "microslip"]
+        memoryless = [t for t in self.terms if not t.hysteretic]
         indices = np.array([CATALOGUE[t.effect].index for t in memoryless], dtype=np.int64)
         coefficients = np.array([t.coefficient for t in memoryless], dtype=np.float64)
         shapes = np.zeros((len(memoryless), 2))
@@ -234,11 +252,16 @@ class JointModel:
         return indices, coefficients, shapes
 
     def microslip_arrays(self) -> tuple[float, float, float]:
-        """``(coefficient, k_t, F_s)`` of the Jenkins element; zeros when absent."""
-        if not self.has_microslip:
+        """``(coefficient, p0, p1)`` of the hysteretic term for the numba kernels; zeros
+        when absent.
+
+        For the Jenkins element that is ``(coefficient, k_t, F_s)``: its shape values in
+        the order its force kernel takes them.
+        """
+        t = self.hysteretic_term
+        if t is None:
             return 0.0, 0.0, 0.0
-        t = self["microslip"]
-        return t.coefficient, t.shape["k_t"], t.shape["F_s"]
+        return (t.coefficient, *CATALOGUE[t.effect].shape_values(**t.shape))
 
     def restoring_force(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Σ c_i φ_i(x, v) along a trajectory (the microslip element starts unstressed)."""
@@ -252,7 +275,7 @@ class JointModel:
     def rhs(self, t: float, state: np.ndarray, base_acceleration: float) -> np.ndarray:
         """Right-hand side of the first-order system, for ODE solvers.
 
-        ``state`` is ``[x, ẋ]``, or ``[x, ẋ, z]`` when the model has microslip,
+        ``state`` is ``[x, ẋ]``, or ``[x, ẋ, z]`` when the model has the hysteretic term,
         with ``z`` the Jenkins slider force (differential form: ż = k_t ẋ while
         sticking, 0 while slipping).
         """
@@ -415,36 +438,9 @@ def _term_from_entry(effect: str, value: Any) -> Term:
     return Term(effect, value)
 
 
-def _pandey2025() -> dict[str, float]:
-    """The paper's Eq. 3 mapped onto the catalogue.
-
-    Eq. 3 reads ẍ + k1 x + k2 ẋ − k3 x² − k4 xẋ + k5 ẋ² − k6 x³ − k7 xẋ² − k8 ẋ³
-    − k9 x|x| + k10 ẋ|ẋ| + k11 (1 − k12 x²) ẋ = f. Catalogue terms are added on
-    the left-hand side, so the minus signs go into the coefficients, and
-    k11 (1 − k12 x²) ẋ splits into viscous damping k11 and Van der Pol −k11 k12.
-    The excitation f is the base term −a_base.
-    """
-    k = dict(
-        k1=4.49e5, k2=1.85, k3=2.60e7, k4=2.95e4, k5=60.5, k6=3.32e9,
-        k7=2.33e4, k8=9.50, k9=3.35e7, k10=11.6, k11=5.66, k12=5.10e5,
-    )  # fmt: skip
-    return {
-        "linear_stiffness": k["k1"],
-        "viscous_damping": k["k2"] + k["k11"],
-        "quadratic_stiffness": -k["k3"],
-        "stiffness_damping_coupling": -k["k4"],
-        "velocity_squared": k["k5"],
-        "cubic_stiffness": -k["k6"],
-        "displacement_velocity_squared": -k["k7"],
-        "cubic_damping": -k["k8"],
-        "abs_stiffness": -k["k9"],
-        "quadratic_damping": k["k10"],
-        "van_der_pol": -k["k11"] * k["k12"],
-    }
-
-
-#: Named models. ``pandey2025`` is the paper's identified Eq. 3.
-PRESETS: dict[str, dict[str, Any]] = {"pandey2025": _pandey2025()}
+#: Named models. ``pandey2025`` is the paper's identified Eq. 3
+#: (:mod:`identification.effects.eq3`).
+PRESETS: dict[str, dict[str, Any]] = {"pandey2025": eq3_coefficients()}
 
 
 def parameter_bounds(

@@ -1,11 +1,12 @@
-"""Adding an effect is adding one module: the README's example, followed everywhere.
+"""Adding an effect is adding one module: the documented example, followed everywhere.
 
-The new module (``quintic_stiffness``, φ = x⁵) is read from the README's
-"Adding an effect" section and dropped into the effects package's path at test
+The new module (``quintic_stiffness``, φ = x⁵) is read from
+``docs/adding-an-effect.md`` and dropped into the effects package's path at test
 time, in a fresh process with its own numba cache; no other file is touched.
 The process reports what the numba kernels, the single- and multi-harmonic
-balance, the pytensor backbone graph and the SINDy library make of it, and this
-test checks that against independent expectations: the closed-form
+balance, the pytensor backbone graph, the SINDy library and the rig's lab-hidden
+presets make of it, and this test checks that against independent expectations:
+the rig's preset that hides it, and the closed-form
 single-harmonic backbone ω² = k + ⅝q a⁴, and the exact period and fundamental
 amplitude of the free oscillation ẍ + kx + qx⁵ = 0 (energy quadrature and an
 ODE solve with the force written here, not taken from the module).
@@ -25,6 +26,7 @@ import pytest
 from scipy import integrate
 
 ROOT = Path(__file__).parents[1]
+GUIDE = ROOT / "docs" / "adding-an-effect.md"
 K = (2 * np.pi * 100.0) ** 2  # 1/s²
 Q = 0.3 * K / 1e-3**4  # x⁵ coefficient: 30 % of the linear force at 1 mm
 PEAKS_M = np.array([2e-4, 6e-4, 1e-3, 1.3e-3])  # displacement extremes of the free orbits
@@ -47,13 +49,14 @@ from identification.analytical.harmonic import backbone, default_time_samples
 from identification.model import JointModel
 from identification.sindy import PAPER_LIBRARY, LibraryTerm
 from pm_joint.forward import describing_graph, harmonic_backbone_graph
+from identification.rig import presets
 
 effect = effects.CATALOGUE["quintic_stiffness"]
-# The README's test of the new effect, run as the test file would.
-readme_test = {"CATALOGUE": effects.CATALOGUE, "pytest": pytest}
-exec(open(given["readme_test"], encoding="utf-8").read(), readme_test)
-for name in [n for n in readme_test if n.startswith("test_")]:
-    readme_test[name]()
+# The guide's test of the new effect, run as the test file would.
+guide_test = {"CATALOGUE": effects.CATALOGUE, "pytest": pytest}
+exec(open(given["guide_test"], encoding="utf-8").read(), guide_test)
+for name in [n for n in guide_test if n.startswith("test_")]:
+    guide_test[name]()
 model = JointModel({"linear_stiffness": K, "quintic_stiffness": Q})
 x = np.array([-1.3e-3, 2e-4, 9e-4])
 indices, coefficients, shapes = model.kernel_arrays()
@@ -62,6 +65,7 @@ multi = backbone(model, amplitudes, method="multi", harmonics=9)
 theta = pt.vector("theta")
 graph = harmonic_backbone_graph(model, theta, ["quintic_stiffness"], amplitudes)
 k_graph, _ = describing_graph("quintic_stiffness", amplitudes, 600.0)
+preset = presets.RIG_PRESETS[presets.lab_hidden_scenario("quintic_stiffness")]
 print(json.dumps({
     "names": list(effects.CATALOGUE),
     "index": effect.index,
@@ -76,20 +80,33 @@ print(json.dumps({
     "describing_graph": k_graph.eval(mode="FAST_COMPILE").tolist(),
     "in_paper_library": "quintic_stiffness" in PAPER_LIBRARY,
     "sindy_column": LibraryTerm("quintic_stiffness").feature(x, np.zeros(3)).tolist(),
-    "readme_tests": [n for n in readme_test if n.startswith("test_")],
+    "guide_tests": [n for n in guide_test if n.startswith("test_")],
+    "lab_hidden": list(presets.LAB_HIDDEN_SCENARIOS),
+    "preset": {
+        "hidden_effects": list(preset.hidden_effects),
+        "truth": preset.model.parameters,
+        "base": preset.base_model.parameters,
+        "description": preset.description,
+        "lab": sorted(preset.lab),
+    },
+    "k0": preset.base_model.linear_stiffness,
+    "key_channel": effect.hidden_scenario.key_channel,
 }))
 """
 
 
-def readme_addition(path: str) -> str:
-    """What the README's "Adding an effect" diff adds to ``path``."""
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+def guide_addition(path: str) -> str:
+    """What the diff of ``docs/adding-an-effect.md`` adds to ``path``."""
+    guide = GUIDE.read_text(encoding="utf-8")
     block = re.search(
-        rf"```diff\n--- [^\n]*\n\+\+\+ b/{re.escape(path)}\n@@[^\n]*\n(.*?)```", readme, re.DOTALL
+        rf"```diff\n--- [^\n]*\n\+\+\+ b/{re.escape(path)}\n@@ -\d+,0 \+\d+,(\d+) @@\n(.*?)```",
+        guide,
+        re.DOTALL,
     )
-    assert block, f"README lost the part of its 'Adding an effect' example that adds to {path}"
-    lines = block.group(1).splitlines()
+    assert block, f"{GUIDE.name} lost the part of its example that adds to {path}"
+    lines = block.group(2).splitlines()
     assert all(line.startswith("+") for line in lines)
+    assert int(block.group(1)) == len(lines), f"the hunk header of {path} miscounts its lines"
     return "\n".join(line[1:] for line in lines) + "\n"
 
 
@@ -127,16 +144,16 @@ def free_orbit(peak_m: float) -> tuple[float, float]:
 @pytest.fixture(scope="module")
 def followed(tmp_path_factory):
     folder = tmp_path_factory.mktemp("effects")
-    module = readme_addition("identification/effects/quintic_stiffness.py")
+    module = guide_addition("identification/effects/quintic_stiffness.py")
     (folder / "quintic_stiffness.py").write_text(module, encoding="utf-8")
-    readme_test = tmp_path_factory.mktemp("tests") / "readme_test.py"
-    readme_test.write_text(readme_addition("tests/test_effects.py"), "utf-8")
+    guide_test = tmp_path_factory.mktemp("tests") / "guide_test.py"
+    guide_test.write_text(guide_addition("tests/test_effects.py"), "utf-8")
     orbits = [free_orbit(peak) for peak in PEAKS_M]
     amplitudes = [a for _, a in orbits]
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path_factory.mktemp("numba_cache")))
     given = {
         "folder": str(folder),
-        "readme_test": str(readme_test),
+        "guide_test": str(guide_test),
         "amplitudes_m": amplitudes,
         "K": K,
         "Q": Q,
@@ -163,7 +180,7 @@ def test_the_new_module_joins_the_catalogue_and_the_numba_kernels(followed):
     np.testing.assert_allclose(report["feature"], x**5, rtol=1e-15)
     np.testing.assert_allclose(report["restoring"], K * x + Q * x**5, rtol=1e-14)
     assert report["in_paper_library"]
-    assert report["readme_tests"]  # the README's own test of the effect ran and passed
+    assert report["guide_tests"]  # the guide's own test of the effect ran and passed
     np.testing.assert_allclose(report["sindy_column"], x**5, rtol=1e-15)
 
 
@@ -179,3 +196,24 @@ def test_both_harmonic_balances_and_the_graph_give_the_quintic_backbone(followed
     np.testing.assert_allclose(report["multi_hz"], exact_hz, rtol=1e-9)
     # The single-harmonic balance misses the higher harmonics: the multi one must do better.
     assert np.all(np.abs(single_hz - exact_hz) > 100 * np.abs(report["multi_hz"] - exact_hz))
+
+
+def test_the_new_module_joins_the_hidden_effect_study(followed):
+    report, _, _ = followed
+    # The rig builds a lab preset hiding it, last (catalogue order), from its own scenario.
+    assert report["lab_hidden"][-1] == "lab-hidden-quintic-stiffness"
+    preset = report["preset"]
+    assert preset["hidden_effects"] == ["quintic_stiffness"]
+    assert preset["truth"]["quintic_stiffness"] == pytest.approx(1e10 * report["k0"], rel=1e-15)
+    assert "quintic_stiffness" not in preset["base"]
+    assert set(preset["truth"]) - set(preset["base"]) == {"quintic_stiffness"}
+    assert preset["description"].startswith("x⁵ hardens by about 5 % at 2 mm")
+    assert "shaker" in preset["lab"]  # under the lab conditions of every hidden-effect preset
+    # The studies judge it on the channel it names, the frequency: hardening of about 5 %.
+    assert report["key_channel"] == "frequency_hz"
+    # x⁵ stiffens nothing at rest: the truth keeps the base model's 101 Hz stiffness.
+    assert (
+        preset["truth"]["linear_stiffness"]
+        == report["k0"]
+        == pytest.approx((2 * np.pi * 101.0) ** 2, rel=1e-12)
+    )

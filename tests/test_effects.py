@@ -16,18 +16,29 @@ from scipy import integrate, special
 
 from identification.effects import (
     CATALOGUE,
+    HYSTERETIC,
+    LINEAR_STIFFNESS,
+    VISCOUS_DAMPING,
     jenkins_force,
     jenkins_path,
     memoryless_force,
     restoring_force,
 )
-from identification.effects.base import NUMPY, ArrayNamespace, FitScale, pytensor_namespace
+from identification.effects.base import (
+    KEY_CHANNELS,
+    NUMPY,
+    ArrayNamespace,
+    Effect,
+    FitScale,
+    pytensor_namespace,
+)
 from identification.effects.special import TANH_QUADRATURE_POINTS
 from pm_joint.forward import describing_graph
 
 #: Mode of the graph checks: the math, not the backend, is under test.
 MATH = "FAST_COMPILE"
 MEMORYLESS = [name for name, effect in CATALOGUE.items() if not effect.hysteretic]
+HYSTERETIC_EFFECTS = [name for name, effect in CATALOGUE.items() if effect.hysteretic]
 
 DESIGN_NAMES = [
     "linear_stiffness",
@@ -318,3 +329,61 @@ def test_fit_grids_lie_inside_the_bounds_and_name_shape_parameters():
             assert 0 < low < high
             assert np.all((values > low) & (values < high)), f"{effect.name}.{shape}"
         assert isinstance(effect.fitted_reading(1.0, effect.defaults, scale), str)
+
+
+# -- what the rest of the library takes from an effect instead of its name ---------------
+
+
+def test_the_kernels_carry_the_one_hysteretic_effect():
+    assert HYSTERETIC_EFFECTS == [HYSTERETIC.name] == ["microslip"]
+    assert (LINEAR_STIFFNESS, VISCOUS_DAMPING) == ("linear_stiffness", "viscous_damping")
+
+
+@pytest.mark.parametrize("name", HYSTERETIC_EFFECTS)
+def test_stuck_stiffness_is_the_describing_stiffness_before_slip(name):
+    effect = CATALOGUE[name]
+    shape = {"k_t": 3e4, "F_s": 0.8}  # slips from 27 µm
+    k_eq, c_eq = effect.describing(1e-9, 600.0, **shape)
+    assert c_eq == 0.0
+    assert effect.stuck_stiffness(2.5, shape) == pytest.approx(2.5 * k_eq, rel=1e-15)
+    # Arrays in, arrays out (the harmonic balance's parameter sets).
+    coefficients = np.array([1.0, 2.0])
+    shapes = {"k_t": np.array([3e4, 4e4]), "F_s": np.array([0.8, 0.9])}
+    np.testing.assert_array_equal(effect.stuck_stiffness(coefficients, shapes), [3e4, 8e4])
+
+
+def test_a_hysteretic_effect_must_say_what_it_adds_while_stuck():
+    fields = dict(name="sticky", term="S(x)", units="1", reading="r", force=lambda x, v, p, q: 0.0)
+    with pytest.raises(ValueError, match="stuck stiffness if and only if hysteretic"):
+        Effect(**fields, hysteretic=True, path_feature=lambda x, v: x)
+    with pytest.raises(ValueError, match="stuck stiffness if and only if hysteretic"):
+        Effect(**fields, stuck_stiffness=lambda c, shape: c)
+
+
+def test_term_text_writes_the_shape_values_in():
+    assert CATALOGUE["cubic_stiffness"].term_text({}) == "x³"
+    assert CATALOGUE["tanh_saturation"].term_text({"x_s": 2.5e-4}, 3) == (
+        CATALOGUE["tanh_saturation"].term.replace("x_s", "0.00025")
+    )
+    # The regularising velocity is a numerical device: equations leave it out.
+    stribeck = CATALOGUE["stribeck_friction"]
+    v_s = stribeck.defaults["v_s"]
+    assert stribeck.term_text(stribeck.defaults, 3) == stribeck.term.replace("v_s", f"{v_s:.3g}")
+    assert HYSTERETIC.term_text({"k_t": 3e4, "F_s": 0.8}, 3) == "Jenkins(x; k_t=3e+04, F_s=0.8)"
+
+
+@pytest.mark.parametrize("name", [n for n, e in CATALOGUE.items() if e.hidden_scenario])
+def test_hidden_scenario_gives_a_term_the_catalogue_takes(name):
+    effect = CATALOGUE[name]
+    scenario = effect.hidden_scenario
+    truth = scenario.truth((2 * np.pi * 101.0) ** 2)
+    terms = dict(truth) if isinstance(truth, dict) else {"coefficient": truth}
+    assert set(terms) - {"coefficient"} <= set(effect.shape)
+    assert np.isfinite(terms["coefficient"]) and terms["coefficient"] != 0
+    effect.shape_values(**{k: v for k, v in terms.items() if k != "coefficient"})
+    assert scenario.key_channel in KEY_CHANNELS and scenario.description
+
+
+def test_every_effect_but_the_linear_pair_can_be_hidden():
+    hidden = {name for name, effect in CATALOGUE.items() if effect.hidden_scenario is not None}
+    assert hidden == set(CATALOGUE) - {LINEAR_STIFFNESS, VISCOUS_DAMPING}

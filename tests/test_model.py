@@ -142,3 +142,21 @@ def test_parameter_bounds_are_sign_aware():
         parameter_bounds(RIG_PRESETS["trc-like"].model, ["microslip.F_s"], 1.5)
     with pytest.raises(ValueError, match="unknown parameter 'k9'"):
         parameter_bounds(RIG_PRESETS["trc-like"].model, ["k9"])
+
+
+def test_the_hysteretic_term_is_found_by_its_flag_not_its_name():
+    plain = JointModel({"linear_stiffness": 4e5, "cubic_stiffness": 1e9})
+    assert plain.hysteretic_term is None and plain.stateful_terms == ()
+    assert not plain.has_microslip and plain.state_size == 2
+    assert plain.microslip_arrays() == (0.0, 0.0, 0.0)
+    model = plain.with_effect("microslip", 0.5, k_t=3e4, F_s=0.8)
+    assert model.hysteretic_term == model["microslip"] and model.stateful_terms == (
+        model["microslip"],
+    )
+    assert model.has_microslip and model.state_size == 3
+    assert model.microslip_arrays() == (0.5, 3e4, 0.8)
+    # Stuck, the Jenkins spring adds to the small-amplitude stiffness; the kernels leave it out.
+    assert model.linear_stiffness == 4e5 + 0.5 * 3e4
+    indices, _, _ = model.kernel_arrays()
+    assert len(indices) == 2
+    assert model["microslip"].text(3) == "0.5·Jenkins(x; k_t=3e+04, F_s=0.8)"

@@ -16,6 +16,7 @@ import pytest
 from independent_sim import free_decay
 
 from identification.analytical import harmonic
+from identification.effects import CATALOGUE
 from identification.model import JointModel
 from identification.sindy import (
     PAPER_LIBRARY,
@@ -42,6 +43,22 @@ TRUTHS = {
         lambda x, v: K1 * x + C1 * v + 2e10 * x**3 + 10.0 * v * abs(v),
     ),
 }
+
+
+def test_polynomial_library_is_the_polynomial_effects_by_degree():
+    # Derived from Effect.polynomial: the members and order it had when written by hand.
+    assert POLYNOMIAL_LIBRARY == (
+        "linear_stiffness", "viscous_damping", "quadratic_stiffness",
+        "stiffness_damping_coupling", "velocity_squared", "cubic_stiffness", "van_der_pol",
+        "displacement_velocity_squared", "cubic_damping",
+    )  # fmt: skip
+    assert set(POLYNOMIAL_LIBRARY) == {n for n, e in CATALOGUE.items() if e.polynomial}
+    assert list(PAPER_LIBRARY) == [n for n in CATALOGUE if n != "microslip"]
+    # Each is the monomial xⁱẋʲ, ordered by degree i + j, then by the power of x.
+    x, v = np.array([0.3, -1.7, 2.2]), np.array([1.1, 0.4, -0.9])
+    powers = [(1, 0), (0, 1), (2, 0), (1, 1), (0, 2), (3, 0), (2, 1), (1, 2), (0, 3)]
+    for name, (i, j) in zip(POLYNOMIAL_LIBRARY, powers, strict=True):
+        np.testing.assert_allclose(CATALOGUE[name].feature(x, v), x**i * v**j, rtol=1e-15)
 
 
 def backbone_error(truth: JointModel, force, library) -> float:

@@ -13,13 +13,16 @@ this package holding every fact of it (see :class:`~identification.effects.base.
 * its shape parameters (names, defaults, units), their start grids and bounds
   in a fit, and what a fitted coefficient says in words.
 
-``microslip`` is the one hysteretic effect: a Jenkins element (spring ``k_t``
-in series with a slider of slip force ``F_s``). Its force depends on the
-loading history, so its ``feature`` needs the whole time series and its
-``force`` kernel takes the element state (see :func:`jenkins_force`).
+``microslip`` is the one hysteretic effect (:data:`HYSTERETIC`): a Jenkins
+element (spring ``k_t`` in series with a slider of slip force ``F_s``). Its
+force depends on the loading history, so its ``feature`` needs the whole time
+series and the integrators carry the element state (see :func:`jenkins_force`);
+code outside this package reaches it through :data:`HYSTERETIC` and the
+:class:`Effect` facts (``hysteretic``, ``stuck_stiffness``, ``term_text``),
+never by its name.
 
 Adding an effect is adding one module here that ends with ``EFFECT = Effect(...)``
-(README, "Adding an effect"); this package finds it. Effect names are public:
+(``docs/adding-an-effect.md``); this package finds it. Effect names are public:
 reports, JSON files and the CLI use exactly these.
 """
 
@@ -47,6 +50,7 @@ from identification.effects.viscous_damping import EFFECT as _VISCOUS_DAMPING
 __all__ = [
     "CATALOGUE",
     "DEFAULT_SIGN_VELOCITY",
+    "HYSTERETIC",
     "LINEAR_STIFFNESS",
     "MICROSLIP_INDEX",
     "VISCOUS_DAMPING",
@@ -63,8 +67,8 @@ __all__ = [
 ]
 
 #: Modules of this package that are not effects.
-_INFRASTRUCTURE = ("base", "special")
-#: Catalogue order of DESIGN.md §3 (reports, the CLI and the SINDy library list
+_INFRASTRUCTURE = ("base", "eq3", "special")
+#: Catalogue order (reports, the CLI and the SINDy library list
 #: effects in it); effect modules not named here follow in name order.
 _DESIGN_ORDER = (
     "linear_stiffness",
@@ -114,8 +118,25 @@ CATALOGUE: dict[str, Effect] = _discover()
 LINEAR_STIFFNESS: str = _LINEAR_STIFFNESS.name
 VISCOUS_DAMPING: str = _VISCOUS_DAMPING.name
 
+
+def _hysteretic() -> Effect:
+    hysteretic = [effect for effect in CATALOGUE.values() if effect.hysteretic]
+    if len(hysteretic) != 1:
+        # The integrators, the harmonic balance and the rig carry the state of one
+        # Jenkins element (jenkins_force); a second needs state kernels of its own.
+        raise ValueError(
+            f"the kernels carry one hysteretic element, the catalogue has {len(hysteretic)}: "
+            f"{[e.name for e in hysteretic]}"
+        )
+    return hysteretic[0]
+
+
+#: The hysteretic effect, the Jenkins element whose state the time integrators, the
+#: multi-harmonic balance and the rig carry (through :func:`jenkins_force`).
+HYSTERETIC: Effect = _hysteretic()
+
 #: Index of the hysteretic Jenkins element, for the numba kernels.
-MICROSLIP_INDEX = CATALOGUE["microslip"].index
+MICROSLIP_INDEX = HYSTERETIC.index
 
 #: ``memoryless_force(index, x, v, p0, p1)``: the force kernel of the effect with
 #: catalogue ``index`` (numba, inlined into its callers; see

@@ -41,6 +41,9 @@ __all__ = [
 ]
 
 PARITIES = ("odd", "even", "mixed")
+#: Shape parameters that are numerical devices, not physics (the friction terms'
+#: regularising velocity): equations do not write their values in.
+NUMERICAL_SHAPES = ("v_reg",)
 
 
 # --------------------------------------------------------------------------
@@ -252,13 +255,22 @@ class Effect:
     hysteretic
         The force depends on the loading history (``microslip``): its feature
         needs the whole path (:attr:`path_feature`), and the dispatcher
-        :func:`force_dispatcher` gives 0 for it (the integrators carry its state).
+        :func:`force_dispatcher` gives 0 for it (the integrators carry its state,
+        and a model's kernel arrays leave it out).
     coefficient_sign
         +1 where only a positive coefficient is physical (a friction or slip force
         opposes the motion), 0 where either sign is.
     path_feature
         Hysteretic effects only: ``(x, v, **shape) -> φ`` along a whole path
         starting unstressed (see :meth:`feature`).
+    stuck_stiffness
+        Hysteretic effects only: ``(coefficient, shape) -> k`` (1/s²), the stiffness
+        the element adds while it sticks, which a model's small-amplitude stiffness
+        includes. Takes and gives arrays alike (shape values by name).
+    written_term
+        ``(shape, precision) -> str``: the term as an equation writes it with these
+        shape values; None writes each shape value in place of its name in
+        :attr:`term` (see :meth:`term_text`).
     shape_grid
         ``(FitScale) -> {shape name: values}``: the values a fit scans for the
         start of a newly added effect ({} when the defaults do).
@@ -292,6 +304,10 @@ class Effect:
     hysteretic: bool = False
     coefficient_sign: int = 0
     path_feature: Callable[..., np.ndarray] | None = field(default=None, repr=False)
+    stuck_stiffness: Callable[[Any, Mapping[str, Any]], Any] | None = field(
+        default=None, repr=False
+    )
+    written_term: Callable[[Mapping[str, float], int], str] | None = field(default=None, repr=False)
     shape_grid: Callable[[FitScale], dict[str, np.ndarray]] = field(
         default=_no_shape_grid, repr=False
     )
@@ -317,6 +333,8 @@ class Effect:
             raise ValueError(f"effect {self.name!r}: force kernels take at most 2 shape parameters")
         if self.hysteretic != (self.path_feature is not None):
             raise ValueError(f"effect {self.name!r}: a path feature if and only if hysteretic")
+        if self.hysteretic != (self.stuck_stiffness is not None):
+            raise ValueError(f"effect {self.name!r}: a stuck stiffness if and only if hysteretic")
         object.__setattr__(self, "shape_parameters", parameters)
         object.__setattr__(self, "shape", tuple(p.name for p in parameters))
         object.__setattr__(self, "defaults", {p.name: float(p.default) for p in parameters})
@@ -336,6 +354,20 @@ class Effect:
                 raise ValueError(f"shape parameter {self.name}.{n} must be finite and > 0, got {v}")
         values += [0.0] * (2 - len(values))
         return values[0], values[1]
+
+    def term_text(self, shape: Mapping[str, float], precision: int = 4) -> str:
+        """The term as it reads in an equation, with the shape values ``shape`` written in.
+
+        Numerical devices among the shape parameters (:data:`NUMERICAL_SHAPES`)
+        keep their names: they are not part of the physics.
+        """
+        if self.written_term is not None:
+            return self.written_term(shape, precision)
+        term = self.term
+        for name, value in shape.items():
+            if name not in NUMERICAL_SHAPES:
+                term = term.replace(name, f"{value:.{precision}g}")
+        return term
 
     def feature(self, x: ArrayLike, v: ArrayLike, **shape: float) -> np.ndarray:
         """φ(x, v) on arrays (numpy, broadcasting): the column SINDy regresses on.
@@ -413,8 +445,8 @@ def force_dispatcher(effects: Sequence[Effect]) -> Callable[..., float]:
     samples with a fixed ``index`` gets the dispatch hoisted out of its loop, and
     a cached caller keeps its cache. (``numba.literal_unroll`` over a tuple of
     kernels does not type; a chain of one inlined closure per effect does, but
-    doubles the cold compile time of every caller: 38 s instead of 22 s of CPU
-    for the harmonic-balance and PLL kernels.) Hysteretic effects give 0 (the
+    about doubles the cold compile time of the harmonic-balance and PLL kernels.)
+    Hysteretic effects give 0 (the
     integrators carry their state); an index beyond the catalogue gives NaN, so
     that a kernel compiled before an effect was added (a stale numba cache:
     ``make clean-cache``) fails loudly instead of dropping the term.

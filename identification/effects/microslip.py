@@ -121,6 +121,15 @@ def _fitted_reading(coefficient: float, shape: Mapping[str, float], scale: FitSc
     return f" (slip from about {1e3 * onset:.2g} mm; {share})"
 
 
+def _stuck_stiffness(coefficient: Any, shape: Mapping[str, Any]) -> Any:
+    # Stuck, the element is its spring k_t.
+    return coefficient * shape["k_t"]
+
+
+def _written_term(shape: Mapping[str, float], precision: int) -> str:
+    return f"Jenkins(x; k_t={shape['k_t']:.{precision}g}, F_s={shape['F_s']:.{precision}g})"
+
+
 def _lab_truth(k0: float) -> dict[str, float]:
     # The lab rig's joint: stuck, it carries 6 % of the stiffness; it slips from 0.2 mm.
     k_t = 0.06 * k0
@@ -138,6 +147,8 @@ EFFECT = Effect(
     damping=_damping,
     hysteretic=True,
     path_feature=_path_feature,
+    stuck_stiffness=_stuck_stiffness,
+    written_term=_written_term,
     shape_grid=_shape_grid,
     shape_bounds=_shape_bounds,
     fitted_reading=_fitted_reading,

@@ -45,7 +45,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import special
 
-from identification.effects import CATALOGUE, jenkins_force
+from identification.effects import HYSTERETIC, jenkins_force
 
 __all__ = [
     "JOINTS",
@@ -241,7 +241,7 @@ class IwanJoint(Joint):
     def describing(self, a: ArrayLike, omega: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Sum of the sliders' Masing describing functions (the catalogue's Jenkins element)."""
         a, omega = np.broadcast_arrays(np.asarray(a, float), np.asarray(omega, float))
-        jenkins = CATALOGUE["microslip"].describing
+        jenkins = HYSTERETIC.describing
         k_eq, c_eq = np.zeros(a.shape), np.zeros(a.shape)
         for k_t, f_s in zip(*self.sliders(), strict=True):
             k_i, c_i = jenkins(a, omega, k_t=k_t, F_s=f_s)

@@ -68,7 +68,13 @@ from numpy.typing import ArrayLike
 
 from identification.analytical.harmonic import coefficient_table, describing_sums
 from identification.analytical.pll import stable_substeps
-from identification.effects import CATALOGUE, jenkins_force, memoryless_force
+from identification.effects import (
+    CATALOGUE,
+    LINEAR_STIFFNESS,
+    VISCOUS_DAMPING,
+    jenkins_force,
+    memoryless_force,
+)
 from identification.measurements.records import CENTRE_POINT, N_PANEL_POINTS, Modes, Record
 from identification.model import JointModel
 from identification.rig.conditions import Controller, Drift, Sensors, Shaker
@@ -85,7 +91,7 @@ from identification.rig.rig import Rig, trc_channels
 __all__ = ["LabAssembly", "LabRig", "LabTimeSeries", "panel_positions"]
 
 #: Catalogue terms of the first mode alone; every other term acts on the joint displacement.
-_MODAL_EFFECTS = ("linear_stiffness", "viscous_damping")
+_MODAL_EFFECTS = (LINEAR_STIFFNESS, VISCOUS_DAMPING)
 #: RK4 is stable for h·|λ| up to about 2.8; keep a margin for nonlinearity.
 _RK4_STABLE_STEP = 2.0
 _GRID = (5, 3)
@@ -141,7 +147,7 @@ class LabAssembly:
     @property
     def damping_ratio(self) -> float:
         """First mode's viscous damping ratio at rest (1)."""
-        return self.model.coefficient("viscous_damping") / (
+        return self.model.coefficient(VISCOUS_DAMPING) / (
             2 * math.sqrt(self.small_amplitude_stiffness)
         )
 
@@ -278,12 +284,15 @@ def _demodulate(filters, k, value, alpha):
 
 
 @numba.njit(cache=True)
-def _lab_kernel(structure, distortion, levels, settings, sensors, out):
-    """Run the whole schedule; fills ``out`` (len(CHANNELS), n) and returns the samples done."""
+def _lab_kernel(structure, distortion, coil_m_s2, settings, sensors, out):
+    """Run the whole schedule; fills ``out`` (len(CHANNELS), n) and returns the samples done.
+
+    ``coil_m_s2`` holds the coil-acceleration amplitude (m/s²) of each hold.
+    """
     dt = settings[_DT]
     n_sub = int(settings[_N_SUB])
     ramp = int(settings[_RAMP])
-    per_level = ramp + int(settings[_HOLD])
+    per_hold = ramp + int(settings[_HOLD])
     kp, ki = settings[_KP], settings[_KI]
     alpha = settings[_STAGE_ALPHA]
     base_reference = settings[_BASE_REFERENCE] > 0.0
@@ -310,16 +319,16 @@ def _lab_kernel(structure, distortion, levels, settings, sensors, out):
     a_from = 0.0
     h = dt / n_sub
     for n in range(n_total):
-        level = n // per_level
-        in_level = n - level * per_level
-        if in_level == 0 and level > 0:
-            a_from = levels[level - 1]
-        a_to = levels[level]
+        hold = n // per_hold
+        in_hold = n - hold * per_hold
+        if in_hold == 0 and hold > 0:
+            a_from = coil_m_s2[hold - 1]
+        a_to = coil_m_s2[hold]
         fraction = n / max(n_total - 1, 1)
         delta = delta0 + (delta1 - delta0) * fraction
         dk = k_drift * ((1.0 + delta) ** 2 - 1.0)
         gain = gain0 + (gain1 - gain0) * fraction
-        amplitude = _ramp(a_from, a_to, in_level, ramp)
+        amplitude = _ramp(a_from, a_to, in_hold, ramp)
         coil[0] = _coil(amplitude, theta, distortion)
         d1 = _derivatives(structure, anchors, slider_forces, dk, x, v, q, w, vb, coil[0])
         a_base = d1[4]
@@ -345,7 +354,7 @@ def _lab_kernel(structure, distortion, levels, settings, sensors, out):
             q_r = _demodulate(filters, 3, base * c, alpha)
             phase -= np.arctan2(q_r, i_r)
         error = _wrap(phase - target)
-        if in_level == ramp and level == 0:
+        if in_hold == ramp and hold == 0:
             control_on = True
         if control_on:
             integral = min(max(integral + ki * error * dt, omega_low), omega_high)
@@ -366,7 +375,7 @@ def _lab_kernel(structure, distortion, levels, settings, sensors, out):
         for j in range(1, 2 * n_sub + 1):
             part = j / (2.0 * n_sub)
             coil[j] = _coil(
-                _ramp(a_from, a_to, in_level + part, ramp), theta + omega * dt * part, distortion
+                _ramp(a_from, a_to, in_hold + part, ramp), theta + omega * dt * part, distortion
             )
         for j in range(n_sub):
             if j > 0:
@@ -550,10 +559,10 @@ class LabRig(Rig):
         if schedule not in ("up", "up-down"):
             raise ValueError(f"schedule must be 'up' or 'up-down', got {schedule!r}")
         draft = cls(model, (1.0,), shaker_gain=shaker_gain, **options)
-        levels = draft.levels_for_amplitudes(amplitudes_m) / shaker_gain
+        drive_v = draft.levels_for_amplitudes(amplitudes_m) / shaker_gain
         if schedule == "up-down":
-            levels = np.concatenate([levels, levels[-2::-1]])
-        return dataclasses.replace(draft, levels_v=tuple(levels))
+            drive_v = np.concatenate([drive_v, drive_v[-2::-1]])
+        return dataclasses.replace(draft, levels_v=tuple(drive_v))
 
     # ------------------------------------------------------------ running
     def modes(self) -> Modes:
@@ -657,8 +666,8 @@ class LabRig(Rig):
         """
         ramp, hold = self._samples()
         n = len(self.levels_v) * (ramp + hold)
-        noise_levels = self.sensors.channel_noise(self.noise_m_s)
-        noise = rng.standard_normal((n, noise_levels.size)) * noise_levels
+        channel_noise_m_s = self.sensors.channel_noise(self.noise_m_s)
+        noise = rng.standard_normal((n, channel_noise_m_s.size)) * channel_noise_m_s
         noise[:, :N_PANEL_POINTS] += self.sensors.panel_offset_m_s
         dropouts = [
             (channel, start, rng.uniform(-1.0, 1.0, length) * self.sensors.dropout_spike_m_s)
@@ -706,7 +715,7 @@ class LabRig(Rig):
                 "small_amplitude_frequency_hz": assembly.linear_frequency_hz,
                 "natural_frequency_drift": list(delta),
                 "sensor_gain": list(self.drift.gain(position)),
-                "channel_noise_m_s": noise_levels.tolist(),
+                "channel_noise_m_s": channel_noise_m_s.tolist(),
                 "dropouts": [[channel, start, spikes.size] for channel, start, spikes in dropouts],
                 "controller_gains": dataclasses.asdict(gains),
                 "predicted_ripple_hz": self.controller.predicted_ripple_hz(

@@ -142,13 +142,13 @@ def levels_for_amplitudes(model: JointModel, amplitudes_m: ArrayLike) -> np.ndar
     from identification.analytical.harmonic import backbone
 
     result = backbone(model, amplitudes_m, method="single")
-    levels = result.base_acceleration
-    if not (result.converged.all() and np.all(levels > 0)):
+    excitation_m_s2 = result.base_acceleration
+    if not (result.converged.all() and np.all(excitation_m_s2 > 0)):
         raise ValueError(
             f"model {model.name or model.equation()!r} has no positive phase-resonant excitation "
             f"at some of the amplitudes {np.asarray(amplitudes_m)} m (negative net damping?)"
         )
-    return levels
+    return excitation_m_s2
 
 
 @dataclass(frozen=True)
@@ -218,10 +218,10 @@ class Rig:
     takes_lab_settings: ClassVar[bool] = False
 
     def __post_init__(self) -> None:
-        levels = tuple(float(v) for v in np.atleast_1d(self.levels_v))
-        if not levels or not all(math.isfinite(v) and v > 0 for v in levels):
+        drive_v = tuple(float(v) for v in np.atleast_1d(self.levels_v))
+        if not drive_v or not all(math.isfinite(v) and v > 0 for v in drive_v):
             raise ValueError(f"Rig.levels_v must be finite voltages > 0, got {self.levels_v}")
-        object.__setattr__(self, "levels_v", levels)
+        object.__setattr__(self, "levels_v", drive_v)
         for name in ("shaker_gain", "hold_s", "fs"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -255,8 +255,8 @@ class Rig:
         cls, model: JointModel, amplitudes_m: ArrayLike, shaker_gain: float = 10.0, **options: Any
     ) -> Rig:
         """A rig whose levels hold the nominal ``model`` at the given amplitudes (m)."""
-        levels = levels_for_amplitudes(model, amplitudes_m) / shaker_gain
-        return cls(model, tuple(levels), shaker_gain=shaker_gain, **options)
+        drive_v = levels_for_amplitudes(model, amplitudes_m) / shaker_gain
+        return cls(model, tuple(drive_v), shaker_gain=shaker_gain, **options)
 
     @classmethod
     def preset(

@@ -42,36 +42,49 @@ from typing import Any
 
 import numpy as np
 
-from identification.effects import CATALOGUE, get_effect
+from identification.effects import CATALOGUE, Effect, get_effect
+from identification.effects.base import NUMERICAL_SHAPES
+from identification.effects.eq3 import EQ3
 from identification.measurements.signals import Kinematics
 from identification.model import JointModel, Term
 from identification.sindy import padding
 
 #: The paper's library: polynomials up to cubic in (x, ẋ) and its joint terms
-#: (every catalogue effect but the hysteretic ``microslip``).
-PAPER_LIBRARY: tuple[str, ...] = tuple(name for name in CATALOGUE if name != "microslip")
+#: (every catalogue effect but the hysteretic one).
+PAPER_LIBRARY: tuple[str, ...] = tuple(
+    name for name, effect in CATALOGUE.items() if not effect.hysteretic
+)
 
-#: Every monomial of degree 1 to 3 in (x, ẋ).
-POLYNOMIAL_LIBRARY: tuple[str, ...] = (
-    "linear_stiffness", "viscous_damping", "quadratic_stiffness", "stiffness_damping_coupling",
-    "velocity_squared", "cubic_stiffness", "van_der_pol", "displacement_velocity_squared",
-    "cubic_damping",
-)  # fmt: skip
+
+def _monomial_order(effect: Effect) -> tuple[int, int, int]:
+    """Where a polynomial effect's column goes: by degree, then the higher power of x first.
+
+    The powers ``(i, j)`` of a monomial ``c xⁱ ẋʲ`` are read from how its force scales,
+    ``φ(2, 1) = 2ⁱ φ(1, 1)`` and ``φ(1, 2) = 2ʲ φ(1, 1)`` (exact in floating point);
+    a polynomial of several monomials goes after them. The catalogue index breaks ties.
+    """
+    force = getattr(effect.force, "py_func", effect.force)
+    unit = force(1.0, 1.0, 0.0, 0.0)
+    powers = []
+    for x, v in ((2.0, 1.0), (1.0, 2.0)):
+        ratio = abs(force(x, v, 0.0, 0.0) / unit) if unit else 0.0
+        power = math.log2(ratio) if ratio > 0 else math.nan
+        powers.append(round(power) if float(power).is_integer() else None)
+    i, j = powers
+    if i is None or j is None:
+        return 4, 0, effect.index
+    return i + j, -i, effect.index
+
+
+#: Every monomial of degree 1 to 3 in (x, ẋ): the catalogue's polynomial effects
+#: (:attr:`~identification.effects.Effect.polynomial`), by degree, x's power first.
+POLYNOMIAL_LIBRARY: tuple[str, ...] = tuple(
+    effect.name
+    for effect in sorted((e for e in CATALOGUE.values() if e.polynomial), key=_monomial_order)
+)
 
 #: How each catalogue coefficient of the ``pandey2025`` preset reads in the paper's Eq. 3.
-EQ3_SYMBOLS: dict[str, str] = {
-    "linear_stiffness": "k1",
-    "viscous_damping": "k2 + k11",
-    "quadratic_stiffness": "−k3",
-    "stiffness_damping_coupling": "−k4",
-    "velocity_squared": "k5",
-    "cubic_stiffness": "−k6",
-    "displacement_velocity_squared": "−k7",
-    "cubic_damping": "−k8",
-    "abs_stiffness": "−k9",
-    "quadratic_damping": "k10",
-    "van_der_pol": "−k11·k12",
-}
+EQ3_SYMBOLS: dict[str, str] = {effect: coefficient.symbols for effect, coefficient in EQ3.items()}
 
 #: The two groups of library columns, each thresholded against its own force.
 GROUPS = ("conservative", "dissipative")
@@ -81,8 +94,8 @@ COLLINEARITY_WARNING = 0.99
 #: lower edge sits at about 0.72 of the lowest fundamental, so the order-8 low-pass
 #: attenuates the fundamental by (1/0.36)^16 ≈ 1e7; a slow mean varies with the amplitude
 #: (level ramps of 0.1 s, decay times of 0.1 s and more), far below the cutoff. A lower cutoff
-#: only lengthens the low-pass's start transient: at a quarter of the edge, the exact model's
-#: residual over a free decay's first eighth was 2.7 times that at half of it.
+#: only lengthens the low-pass's start transient, which the exact model's residual over the
+#: start of a free decay shows.
 SLOW_CUTOFF = 0.5
 #: Condition number of the scaled library above which it counts as rank-deficient (the
 #: Gram matrix resolves condition numbers up to about 1e8 in double precision).
@@ -155,7 +168,7 @@ def library_grid(
 def shape_text(terms: Sequence[LibraryTerm]) -> str:
     """The shape parameters of a library, as ``effect.param=value`` (for messages)."""
     return ", ".join(f"{t.effect}.{k}={v:g}" for t in terms for k, v in t.shape.items()
-                     if k != "v_reg") or "default shapes"  # fmt: skip
+                     if k not in NUMERICAL_SHAPES) or "default shapes"  # fmt: skip
 
 
 def library_model(terms: Sequence[LibraryTerm], coefficients: np.ndarray) -> JointModel:
@@ -218,8 +231,8 @@ def regression_target(kin: Kinematics) -> np.ndarray:
     """``y = ẍ + a_base`` over the valid samples.
 
     Not band-passed a second time: on the open-loop sweeps of ``tests/test_sindy.py``
-    a second (padded) band-pass of ``y`` raised the residual of the exact model from
-    0.034 to 0.038 m/s² and made the selection keep a spurious ``x·ẋ²``.
+    a second (padded) band-pass of ``y`` raised the residual of the exact model and
+    made the selection keep a spurious ``x·ẋ²``.
     """
     return kin.absolute_acceleration[kin.valid]
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from identification.criticism.criticism import Criticism
 from identification.criticism.criticism import criticize as criticize_model
-from identification.effects import CATALOGUE
+from identification.effects import CATALOGUE, LINEAR_STIFFNESS
 from identification.measurements.backbone import BackboneSet
 from identification.model import JointModel
 from pm_joint.inference.models import POPULATION_SUFFIX
@@ -65,7 +65,7 @@ def posterior_samples(
     if not wanted:
         raise ValueError(
             f"the posterior has no variable named like a model parameter "
-            f"(it has {sorted(table)}; expected e.g. {list(names or ['cubic_stiffness'])})"
+            f"(it has {sorted(table)}; expected e.g. {list(names or [LINEAR_STIFFNESS])})"
         )
     draws = np.column_stack([table[k] for k in wanted])
     if not np.isfinite(draws).all():
