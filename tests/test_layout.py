@@ -29,10 +29,23 @@ def _modules() -> dict[str, Path]:
     return modules
 
 
+def _runtime_nodes(tree: ast.AST):
+    """Every node of ``tree`` but those under ``if TYPE_CHECKING:``: an import made for
+    annotations alone is never executed, so it makes no cycle at run time."""
+    for child in ast.iter_child_nodes(tree):
+        if isinstance(child, ast.If) and ast.unparse(child.test).endswith("TYPE_CHECKING"):
+            for stmt in child.orelse:
+                yield stmt
+                yield from _runtime_nodes(stmt)
+            continue
+        yield child
+        yield from _runtime_nodes(child)
+
+
 def _imports(path: Path, known: dict[str, Path]) -> set[str]:
     """Library modules ``path`` imports (``from a import b`` may name a module ``a.b``)."""
     found = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in _runtime_nodes(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.Import):
             found |= {alias.name for alias in node.names}
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
