@@ -455,7 +455,7 @@ def _jenkins_loop(x, c_ms, k_t, f_s, force, anchor):
             anchor[n] = -2 if slipping else last_slip
 
 
-# Serial on purpose: batches scale out through executors (DESIGN §4), and numba's
+# Serial on purpose: batches scale out through executors (docs/architecture.md), and numba's
 # threading layers are neither fork-safe (OpenMP) nor re-entrant (workqueue), which
 # PyMC chains and dask thread workers would hit. Reassociation lets the projections
 # vectorise without giving up NaN semantics.

@@ -64,7 +64,7 @@ __all__ = [
 
 #: Modules of this package that are not effects.
 _INFRASTRUCTURE = ("base", "special")
-#: Catalogue order of DESIGN.md §3 (reports, the CLI and the SINDy library list
+#: Catalogue order of docs/science.md §3 (reports, the CLI and the SINDy library list
 #: effects in it); effect modules not named here follow in name order.
 _DESIGN_ORDER = (
     "linear_stiffness",
