@@ -40,7 +40,7 @@ MATH = "FAST_COMPILE"
 MEMORYLESS = [name for name, effect in CATALOGUE.items() if not effect.hysteretic]
 HYSTERETIC_EFFECTS = [name for name, effect in CATALOGUE.items() if effect.hysteretic]
 
-DESIGN_NAMES = [
+CATALOGUE_NAMES = [
     "linear_stiffness",
     "viscous_damping",
     "quadratic_stiffness",
@@ -61,7 +61,7 @@ DESIGN_NAMES = [
 
 
 def test_catalogue_has_exactly_the_design_names():
-    assert list(CATALOGUE) == DESIGN_NAMES
+    assert list(CATALOGUE) == CATALOGUE_NAMES
     for effect in CATALOGUE.values():
         assert effect.units and effect.reading and effect.term
         assert set(effect.defaults) == set(effect.shape) == set(effect.shape_units)

@@ -1,6 +1,6 @@
 """What a laboratory adds to a phase-resonance test: the lab rig's artefact settings.
 
-Each class is one source of the imperfections real records carry,
+Each class is one source of the imperfections real records carry (docs/science.md §6),
 with its units, what it models and what a lab would see. The lab engine
 (:mod:`identification.rig.lab`) puts them into the simulation; the settings and
 what they imply (gains, predicted ripple, drift at a time) live here.
