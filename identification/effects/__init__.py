@@ -70,7 +70,7 @@ __all__ = [
 _INFRASTRUCTURE = ("base", "eq3", "special")
 #: Catalogue order of docs/science.md §3 (reports, the CLI and the SINDy library list
 #: effects in it); effect modules not named here follow in name order.
-_CATALOGUE_ORDER = (
+_ORDER = (
     "linear_stiffness",
     "viscous_damping",
     "quadratic_stiffness",
@@ -93,7 +93,7 @@ _CATALOGUE_ORDER = (
 def _effect_modules() -> list[str]:
     """Names of the effect modules on this package's path, in catalogue order."""
     found = sorted(m.name for m in pkgutil.iter_modules(__path__) if m.name not in _INFRASTRUCTURE)
-    return sorted(found, key=lambda n: _CATALOGUE_ORDER.index(n) if n in _CATALOGUE_ORDER else len(found))
+    return sorted(found, key=lambda n: _ORDER.index(n) if n in _ORDER else len(found))
 
 
 def _discover() -> dict[str, Effect]:
