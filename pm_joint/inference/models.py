@@ -419,10 +419,8 @@ def hierarchical_model(
                 noise = noise * pt.exp(slope * log_relative_amplitude)
             if relative:
                 # Scaled by the measured value, not the predicted one: a noise that follows
-                # the prediction lets the sampler trade fit for noise (demo campaign, all
-                # non-centred, nutpie 2 × 2 000: r̂ 1.83 and 505 divergences scaled by the
-                # prediction, r̂ 1.017 and 1 divergence by the measurement); at 2 % noise
-                # the two scales differ by about 2 %.
+                # the prediction lets the sampler trade fit for noise (chains that diverge
+                # and do not mix); at 2 % noise the two scales differ by about 2 %.
                 noise = noise * np.abs(scored)
             pm.Normal(channel, predicted, noise, observed=observed, dims="point")
     pm_model.population_model = HIERARCHICAL  # sample() keeps it with the draws

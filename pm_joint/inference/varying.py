@@ -3,9 +3,9 @@
 A parameter whose assembly-to-assembly change does not move a curve beyond the
 scatter of the measured curves cannot be learnt per assembly: its per-curve
 values are set by the prior, and in the centred hierarchical model they couple
-with the population spread into a funnel that NUTS crawls through (the full demo's
-campaign with all seven SINDy coefficients varying had not finished 2 × 1 000
-draws after 30 minutes). Such parameters are held at the template's values and
+with the population spread into a funnel that NUTS crawls through (on the full
+demo's campaign with every SINDy coefficient varying, far slower than the demo
+itself). Such parameters are held at the template's values and
 the rest vary.
 
 The choice is a subset selection by QR with column pivoting (Golub & Van Loan,
