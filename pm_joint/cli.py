@@ -479,11 +479,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     def one_line(message, category, *_, **__) -> str:
         return f"pm-joint {args.command}: {category.__name__}: {message}\n"
 
+    shown: set[str] = set()
+
     def show(message, category, *_, **__) -> None:
         from tqdm.auto import tqdm
 
+        line = one_line(message, category).rstrip("\n")
+        # Each warning once per process: Python's own once-per-place memory is wiped whenever
+        # a library changes the warning filters (every catch_warnings block does), so e.g.
+        # pytensor's notice that the surrogate's onnxruntime call runs in numba's object mode
+        # (by design: onnxruntime is no numba code) came once per compiled function.
+        if line in shown:
+            return
+        shown.add(line)
         # Through tqdm: a progress bar on the terminal is cleared first and redrawn after.
-        tqdm.write(one_line(message, category).rstrip("\n"), file=sys.stderr)
+        tqdm.write(line, file=sys.stderr)
 
     showwarning = warnings.showwarning
     warnings.formatwarning = one_line  # a warning is one line, as an error is

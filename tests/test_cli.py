@@ -293,6 +293,29 @@ def test_the_cli_names_the_samplers_and_population_models_the_library_has():
     assert cli.POPULATION_MODELS == inference.POPULATION_MODELS
 
 
+def test_each_warning_is_printed_once():
+    """Libraries reset Python's once-per-place memory (any catch_warnings block does): the
+    same warning, raised three times from one place, is still printed once."""
+    script = (
+        "import warnings\n"
+        "from pm_joint import cli\n"
+        "def noisy(args):\n"
+        "    for _ in range(3):\n"
+        "        with warnings.catch_warnings():\n"
+        "            pass\n"
+        "        warnings.warn('object mode, again', UserWarning)\n"
+        "    warnings.warn('another one', UserWarning)\n"
+        "cli._cmd_effects = noisy\n"
+        "raise SystemExit(cli.main(['effects']))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=600)  # fmt: skip
+    assert done.returncode == 0, done.stderr[-2000:]
+    lines = done.stderr.splitlines()
+    assert lines.count("pm-joint effects: UserWarning: object mode, again") == 1, lines
+    assert lines.count("pm-joint effects: UserWarning: another one") == 1, lines
+
+
 def _help_of(option: str) -> str:
     """The ``pm-joint update`` help of one option, as argparse holds it."""
     parser = build_parser()
