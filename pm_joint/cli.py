@@ -236,6 +236,7 @@ def _cmd_train_surrogate(args: argparse.Namespace) -> None:
 
 
 def _cmd_criticize(args: argparse.Namespace) -> None:
+    from pm_joint.html import rounds_text
     from pm_joint.pipeline import criticize_campaign
     from pm_joint.workspace import Workspace
 
@@ -244,11 +245,7 @@ def _cmd_criticize(args: argparse.Namespace) -> None:
         crit = criticize_campaign(
             workspace, args.model, args.out, rounds=args.rounds, executor=executor
         )
-    rounds = crit.rounds
-    for k, report in enumerate(rounds, start=1):
-        if len(rounds) > 1:
-            print(f"--- round {k} of {len(rounds)} ({report['action']}): {report['verdict']}")
-        print(report["summary"])
+    print(rounds_text(crit.rounds))
     print(f"wrote {args.out}/criticism.json")
 
 

@@ -19,6 +19,7 @@ from pm_joint.html import (
     Section,
     criticism_section,
     posterior_sections,
+    rounds_text,
     surrogate_section,
     write_index,
 )
@@ -211,7 +212,7 @@ def run_demo(
         rounds=cfg.criticism_rounds, measured=measured, posterior=hierarchical,
     )  # fmt: skip
     stages.sections.append(criticism_section(crit.to_dict(), out / "criticism", out))
-    print(crit.summary())
+    print(rounds_text(crit.rounds))  # each round's finding, the final state last
 
     stages.sections.append(Section("Timings", tables=[("stage times (s)", [stages.timings])]))
     atomic_write_text(out / "timings.json", json.dumps(stages.timings, indent=2))

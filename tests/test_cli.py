@@ -8,6 +8,7 @@ resonance, so that the expected backbones and model are known exactly.
 
 import argparse
 import json
+import os
 import re
 import subprocess
 import sys
@@ -24,6 +25,9 @@ from pm_joint.cli import EXIT_NOT_CONVERGED, build_parser, main
 from pm_joint.html import missing_links
 from pm_joint.inference import load_posterior
 from surrogates.dataset import BackboneDataset
+
+sys.path.insert(0, str(Path(__file__).parent))
+from browser import assert_page_works, find_browser, require_browser
 
 FS = 10_000.0
 ZETA = 0.005
@@ -383,3 +387,13 @@ def test_demo_runs_end_to_end_at_small_size(tmp_path):
     for section in ("SINDy identification", "Neural surrogate", "Stochastic updating",
                     "PDFs at low, mid and high amplitude", "Model criticism"):  # fmt: skip
         assert section in page
+    # The criticism leads with each round's finding; the final model's state comes after.
+    criticism = page[page.index('id="model-criticism"') :]
+    assert criticism.index("Round 1 of ") < criticism.index("The final model")
+    assert re.search(r"mean acceptance \d\.\d\d\.", page)  # was 0.26176666666666665
+    # Each warning once (pytensor's object-mode notice came once per compiled function).
+    warned = [line for line in done.stderr.splitlines() if line.startswith("pm-joint demo: ")]
+    assert len(warned) == len(set(warned)), warned
+    # The page in a real browser: every image loads, nothing logged as an error.
+    if find_browser() or os.environ.get("CI") == "true":
+        assert_page_works(index, require_browser())
