@@ -101,15 +101,15 @@ def varying_parameters(
     """
     names = list(names)
     low, high = measured.common_range()
-    levels = np.geomspace(low, high, n_amplitudes)
-    scatter = assembly_scatter(measured, levels)
+    amplitudes_m = np.geomspace(low, high, n_amplitudes)
+    scatter = assembly_scatter(measured, amplitudes_m)
     theta0 = np.array([model.parameters[n] for n in names], dtype=float)
     step = 1e-3  # in log θ: small against any curvature of the backbone, large against rounding
     sets = np.repeat(theta0[None, :], 2 * len(names), axis=0)
     for j in range(len(names)):
         sets[2 * j, j] *= np.exp(step)
         sets[2 * j + 1, j] *= np.exp(-step)
-    curves = backbone(model, levels, parameters=sets, names=names, method="single")
+    curves = backbone(model, amplitudes_m, parameters=sets, names=names, method="single")
     rows = []
     for channel in channels:
         values = getattr(curves, channel)
