@@ -207,7 +207,7 @@ def report(results: dict, surrogate: dict) -> None:
         if "nutpie" in rows:
             for f in rows.values():
                 f["ess_per_s_vs_nutpie"] = f["ess_bulk_per_s"] / rows["nutpie"]["ess_bulk_per_s"]
-    default = SAMPLER_DEFAULTS["matching", "harmonic"]["sampler"]
+    default = SAMPLER_DEFAULTS["matching", "harmonic"].sampler
     harmonic = results.get("harmonic", {})
     if "nutpie" in harmonic and default in harmonic:
         ratio = harmonic[default]["ess_per_s_vs_nutpie"]

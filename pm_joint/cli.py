@@ -28,11 +28,16 @@ from identification.measurements.signals import DECAY_EDGE_PERIODS
 from identification.model import PRESETS, JointModel
 from identification.rig import RIG_PRESETS
 from identification.sindy import PAPER_LIBRARY
+from pm_joint.sampler_defaults import (
+    DEFAULT_FORWARD,
+    FORWARD_MODELS,
+    POPULATION_MODELS,
+    SAMPLERS,
+    default_help,
+    forward_help,
+    sampler_defaults,
+)
 from surrogates.labels import MISFIT_POLICIES
-
-# Names only: the samplers and population models are known without importing PyMC.
-SAMPLERS = ("metropolis", "demetropolisz", "nuts", "nutpie")
-POPULATION_MODELS = ("matching", "hierarchical")
 
 
 def _effect_list(text: str) -> list[str]:
@@ -233,6 +238,7 @@ def _cmd_train_surrogate(args: argparse.Namespace) -> None:
 
 
 def _cmd_criticize(args: argparse.Namespace) -> None:
+    from pm_joint.html import rounds_text
     from pm_joint.pipeline import criticize_campaign
     from pm_joint.workspace import Workspace
 
@@ -241,11 +247,7 @@ def _cmd_criticize(args: argparse.Namespace) -> None:
         crit = criticize_campaign(
             workspace, args.model, args.out, rounds=args.rounds, executor=executor
         )
-    rounds = crit.rounds
-    for k, report in enumerate(rounds, start=1):
-        if len(rounds) > 1:
-            print(f"--- round {k} of {len(rounds)} ({report['action']}): {report['verdict']}")
-        print(report["summary"])
+    print(rounds_text(crit.rounds))
     print(f"wrote {args.out}/criticism.json")
 
 
@@ -255,18 +257,17 @@ EXIT_NOT_CONVERGED = 3
 
 def _cmd_update(args: argparse.Namespace) -> int:
     from pm_joint.analysis import convergence_verdict
-    from pm_joint.inference import SAMPLER_DEFAULTS
     from pm_joint.pipeline import posterior_report, update_backbones
     from pm_joint.workspace import Workspace
 
-    forward = args.forward or ("harmonic" if args.population == "hierarchical" else "surrogate")
+    forward = args.forward or DEFAULT_FORWARD[args.population]
     if forward == "surrogate" and not args.surrogate:
         raise ValueError("--forward surrogate needs --surrogate SURROGATE_DIR")
     if forward != "surrogate" and not args.model:
         raise ValueError(f"--forward {forward} needs --model model.json")
     workspace = Workspace(args.dir, model=args.model, surrogate=args.surrogate,
                           **_workspace_options(args))  # fmt: skip
-    sampler = args.sampler or SAMPLER_DEFAULTS.get((args.population, forward), {}).get("sampler")
+    sampler = args.sampler or sampler_defaults(args.population, forward).sampler
     # nutpie keeps its draws in memory: no trace folder unless one is asked for (then refused).
     trace = args.trace or (None if sampler == "nutpie" else Path(args.out).with_suffix(".zarr"))
     idata = update_backbones(
@@ -428,23 +429,16 @@ def build_parser() -> argparse.ArgumentParser:
         "measured point (LOO) (default: matching)",
     )  # fmt: skip
     p.add_argument("--model", help="model JSON file (for --forward harmonic|pll)")
-    p.add_argument(
-        "--forward", choices=("surrogate", "harmonic", "pll"),
-        help="forward model (default: surrogate; harmonic for --population hierarchical)",
-    )  # fmt: skip
+    p.add_argument("--forward", choices=FORWARD_MODELS,
+                   help=f"forward model (default: {forward_help()})")  # fmt: skip
     p.add_argument("--surrogate", help="surrogate folder (for --forward surrogate)")
     p.add_argument("--out", required=True, help="posterior netCDF file")
-    p.add_argument(
-        "--sampler", choices=SAMPLERS,
-        help="default: metropolis (matching on surrogate or pll), nutpie (on harmonic)",
-    )  # fmt: skip
-    p.add_argument(
-        "--draws",
-        type=int,
-        help="draws per chain (default 30000 metropolis, 2000 matching on harmonic, "
-        "1000 hierarchical)",
-    )
-    p.add_argument("--tune", type=int, help="tuning steps (default 3000 metropolis, 1000 nutpie)")
+    # The defaults' words come from the table the updating reads (SAMPLER_DEFAULTS).
+    p.add_argument("--sampler", choices=SAMPLERS, help=f"default: {default_help('sampler')}")
+    p.add_argument("--draws", type=int,
+                   help=f"draws per chain (default: {default_help('draws')})")  # fmt: skip
+    p.add_argument("--tune", type=int,
+                   help=f"tuning steps per chain (default: {default_help('tune')})")  # fmt: skip
     p.add_argument("--chains", type=int, default=2, help="chains (default 2)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--report", help="also write the arviz report into this folder")
@@ -484,11 +478,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     def one_line(message, category, *_, **__) -> str:
         return f"pm-joint {args.command}: {category.__name__}: {message}\n"
 
+    shown: set[str] = set()
+
     def show(message, category, *_, **__) -> None:
         from tqdm.auto import tqdm
 
+        line = one_line(message, category).rstrip("\n")
+        # Each warning once per process: Python's own once-per-place memory is wiped whenever
+        # a library changes the warning filters (every catch_warnings block does), so e.g.
+        # pytensor's notice that the surrogate's onnxruntime call runs in numba's object mode
+        # (by design: onnxruntime is no numba code) came once per compiled function.
+        if line in shown:
+            return
+        shown.add(line)
         # Through tqdm: a progress bar on the terminal is cleared first and redrawn after.
-        tqdm.write(one_line(message, category).rstrip("\n"), file=sys.stderr)
+        tqdm.write(line, file=sys.stderr)
 
     showwarning = warnings.showwarning
     warnings.formatwarning = one_line  # a warning is one line, as an error is

@@ -19,6 +19,7 @@ from pm_joint.html import (
     Section,
     criticism_section,
     posterior_sections,
+    rounds_text,
     surrogate_section,
     write_index,
 )
@@ -41,12 +42,10 @@ class DemoSize:
     criticism_rounds: int
 
 
-#: ``full`` is the paper's campaign: 25 measured backbones, 500 training curves; the
-#: population matching with the surrogate's default sampler
-#: (:data:`~pm_joint.inference.SAMPLER_DEFAULTS`, whose reason the report prints; the
-#: paper's Metropolis, its proposal covariance learned while tuning, proposing in the prior
-#: box's coordinates), two chains of 30 000 on the two cores (``draws=None``: the
-#: sampler's default); the hierarchical model with nutpie, two chains of 4 000.
+#: ``full`` is the paper's campaign (25 measured backbones, 500 training curves); both sizes
+#: sample with the default sampler of each population model
+#: (:data:`~pm_joint.sampler_defaults.SAMPLER_DEFAULTS`, whose reason the report prints), at
+#: the draws and tuning steps given here.
 SIZES = {
     "full": DemoSize(
         assemblies=25, n_levels=10, sindy_records=3, surrogate_curves=500, surrogate_epochs=None,
@@ -63,9 +62,8 @@ DEMO_LIBRARY = PAPER_LIBRARY
 #: The surrogate's box: ± this around the identified model, widened to cover every label
 #: (:func:`pm_joint.pipeline.surrogate_box`); the updating's prior is this box. At ± 20 %
 #: the backbones' nonlinearity in the parameters reaches the scale of the assembly scatter
-#: (the linear baseline's frequency error is 0.35–0.8 × the scatter per amplitude, 1.3 × at
-#: the lowest, where 3 curves give it; at ± 10 % 0.09–0.33 ×) and the surrogate meets issue
-#: #15's targets there (bench/results/surrogate_demo_spread0.2.json).
+#: (a linear surrogate would no longer do) and the surrogate meets issue #15's targets
+#: there (bench/results/surrogate_demo_spread0.2.json, surrogate_demo_spread0.1.json).
 SURROGATE_SPREAD = 0.2
 
 
@@ -214,7 +212,7 @@ def run_demo(
         rounds=cfg.criticism_rounds, measured=measured, posterior=hierarchical,
     )  # fmt: skip
     stages.sections.append(criticism_section(crit.to_dict(), out / "criticism", out))
-    print(crit.summary())
+    print(rounds_text(crit.rounds))  # each round's finding, the final state last
 
     stages.sections.append(Section("Timings", tables=[("stage times (s)", [stages.timings])]))
     atomic_write_text(out / "timings.json", json.dumps(stages.timings, indent=2))

@@ -23,6 +23,7 @@ __all__ = [
     "criticism_section",
     "missing_links",
     "posterior_sections",
+    "rounds_text",
     "surrogate_section",
     "write_index",
 ]
@@ -65,7 +66,7 @@ class Section:
 
 def _format(value) -> str:
     if isinstance(value, float):
-        return f"{value:.6g}"
+        return f"{value:.4g}"
     if isinstance(value, (list, dict)):
         return html.escape(json.dumps(value, default=str))
     return html.escape(str(value))
@@ -150,7 +151,7 @@ def posterior_sections(
         f"Sampler: {sampler.get('sampler')}"
         + (f" ({sampler['reason']})" if sampler.get("reason") else "")
         + f", {sampler.get('draws')} draws × {sampler.get('chains')} chains; "
-        f"mean acceptance {sampler.get('acceptance_rate')}.",
+        f"mean acceptance {_number(sampler.get('acceptance_rate'), '.2f')}.",
     ]
     sections = [
         Section(
@@ -177,6 +178,11 @@ def posterior_sections(
     ]
 
 
+def _number(value: Any, spec: str) -> str:
+    """A number in words at ``spec``; what is not a number (None: not recorded) as it is."""
+    return format(value, spec) if isinstance(value, int | float) else str(value)
+
+
 def _loo_text(loo: Any) -> str:
     """LOO in words: a refusal, the figures, or nothing."""
     if loo is None:
@@ -190,22 +196,59 @@ def _loo_text(loo: Any) -> str:
     )
 
 
+def rounds_text(rounds: Sequence[Mapping[str, Any]]) -> str:
+    """Every round's summary in order, each headed by its action and verdict when there
+    are several (what ``pm-joint criticize`` prints)."""
+    parts = []
+    for k, report in enumerate(rounds, start=1):
+        head = f"--- round {k} of {len(rounds)} ({report['action']}): {report['verdict']}\n"
+        parts.append((head if len(rounds) > 1 else "") + report["summary"])
+    return "\n".join(parts)
+
+
+def _round_finding(k: int, n: int, report: Mapping[str, Any]) -> str:
+    """One round's finding: its verdict, where its model failed and what it proposed."""
+    text = f"Round {k} of {n} ({report['action']}): {report['verdict_text']}."
+    # A round's record says where its model failed only in its summary's "fails:" lines.
+    fails = [line.removeprefix("fails: ") for line in report["summary"].splitlines()
+             if line.startswith("fails: ")]  # fmt: skip
+    if fails:
+        text += f" Where it fails: {'; '.join(fails)}."
+    proposed = [entry for entry in report.get("ranking", []) if entry.get("reading")]
+    if report.get("significant") and proposed:
+        best = proposed[0]
+        text += f" Most likely missing: {best['effect']}, {best['reading']}."
+    return text
+
+
 def criticism_section(
     content: Mapping[str, Any], folder: str | os.PathLike, page_folder: str | os.PathLike
 ) -> Section:
     """Section of a criticism: ``content`` is its record (``Criticism.to_dict()``, or the
-    ``criticism.json`` of an earlier run) and ``folder`` where its figures were written."""
+    ``criticism.json`` of an earlier run) and ``folder`` where its figures were written.
+
+    The section leads with each round's finding (what was missing, where the model of
+    that round failed), in order; the final model's state comes after them.
+    """
     rel = Path(os.path.relpath(folder, page_folder))
+    rounds = content.get("rounds") or [content]  # a record written before rounds existed
     verdict = (
         "Something significant is missing." if content["significant"]
         else "Nothing significant missing."
     )  # fmt: skip
     fails = "; ".join(r.get("text", str(r)) for r in content.get("fails_at", [])) or "nowhere"
+    findings = [_round_finding(k, len(rounds), r) for k, r in enumerate(rounds, start=1)]
+    final = f"The final model, {content['equation']}: {verdict} Where it fails: {fails}."
+    rankings = [
+        (f"round {k} ({r['action']}): ranked missing effects", r.get("ranking", []))
+        for k, r in enumerate(rounds, start=1)
+    ]
     return Section(
         "Model criticism",
-        f"{verdict} Where the model fails: {fails}.",
+        "\n\n".join([*findings, final]),
+        code=rounds_text(rounds),
         tables=[
-            ("ranked missing effects", content["ranking"]),
+            *rankings,
             (
                 "error history",
                 [

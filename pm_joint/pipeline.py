@@ -42,9 +42,6 @@ from identification.sindy import (
 from pm_joint import html, plotting
 from pm_joint.analysis import convergence_verdict, identifiability, loo, population_predictive
 from pm_joint.inference import (
-    GRADIENT_SAMPLERS,
-    POPULATION_MODELS,
-    SAMPLER_DEFAULTS,
     amplitudes_within_surrogate,
     build_model,
     continue_sampling,
@@ -54,6 +51,7 @@ from pm_joint.inference import (
 )
 from pm_joint.inference.varying import varying_parameters
 from pm_joint.report_folder import report
+from pm_joint.sampler_defaults import GRADIENT_SAMPLERS, sampler_defaults, sampler_reason
 from pm_joint.workspace import Workspace
 from surrogates.dataset import add_measured, generate_dataset, record_labels
 from surrogates.grid import GRID_CHANNELS, assembly_scatter, measured_grid
@@ -437,16 +435,10 @@ def update_backbones(
     convergence verdict (attribute ``convergence``, JSON); the workspace's
     posterior becomes the returned DataTree.
     """
-    if population not in POPULATION_MODELS:
-        raise ValueError(f"population must be one of {POPULATION_MODELS}, got {population!r}")
-    if (population, forward) not in SAMPLER_DEFAULTS:
-        runs_on = ", ".join(f for p, f in SAMPLER_DEFAULTS if p == population)
-        raise ValueError(f"population model {population!r} does not run on forward model "
-                         f"{forward!r}; it runs on: {runs_on}")  # fmt: skip
-    defaults = SAMPLER_DEFAULTS[population, forward]
-    sampler = sampler or defaults["sampler"]
-    draws = draws or defaults["draws"]
-    tune = tune or defaults["tune"]
+    defaults = sampler_defaults(population, forward)
+    sampler = sampler or defaults.sampler
+    draws = draws or defaults.draws
+    tune = tune or defaults.tune
     earlier_run = trace is not None and Path(trace).exists()
     if earlier_run and not resume:
         raise ValueError(
@@ -463,12 +455,9 @@ def update_backbones(
             )
             names = choice.varying
         names = list(names)
-        # Centred where the curves pin a parameter, non-centred elsewhere ("auto"): on the full
-        # demo campaign (25 curves, 10 points each) the all-centred form ended 2 × 1 000
-        # nutpie draws with 58–194 divergences and r̂ 1.09–1.17 whichever parameters varied,
-        # the all-non-centred one with 0 divergences, r̂ 1.006 (3 varying); on trc-like PLL
-        # campaigns, where each curve pins all four varying parameters, the non-centred form
-        # left r̂ up to 1.7 (linear stiffness) after 2 × 500 NUTS draws.
+        # Centred where the curves pin a parameter, non-centred elsewhere ("auto"): either form
+        # alone left unconverged chains on some campaigns (the demo's for all-centred, the
+        # trc-like PLL ones for all-non-centred), each where the other converged.
         pm_model = hierarchical_model(
             workspace.model, measured, names, amplitudes_m=amplitudes_m, channels=channels,
             centred="auto",
@@ -501,7 +490,7 @@ def update_backbones(
             )
     else:
         idata.attrs["identifiability"] = json.dumps(identifiability(pm_model, idata))
-    reason = defaults["reason"] if sampler == defaults["sampler"] else "chosen by the caller"
+    reason = sampler_reason(population, forward, sampler)
     idata.attrs["sampler_reason"] = reason
     metadata = {
         "forward": forward,

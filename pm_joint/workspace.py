@@ -255,15 +255,15 @@ class Workspace:
         channels: Sequence[str] = ("frequency_hz",),
         family: str = "copula",
     ) -> BackboneDensity:
-        """The likelihood density of the backbones, fitted once per levels, channels and family.
+        """The backbones' likelihood density, fitted once per amplitude grid, channels and family.
 
         ``amplitudes_m`` default: :func:`~pm_joint.distributions.amplitude_levels`.
         """
-        levels = amplitude_levels(self.backbones) if amplitudes_m is None else amplitudes_m
-        levels = np.asarray(levels, dtype=float)
-        key = (tuple(levels.tolist()), tuple(channels), family)
+        grid_m = amplitude_levels(self.backbones) if amplitudes_m is None else amplitudes_m
+        grid_m = np.asarray(grid_m, dtype=float)
+        key = (tuple(grid_m.tolist()), tuple(channels), family)
         if key not in self._densities:
             self._densities[key] = BackboneDensity.fit(
-                self.backbones, levels, channels=channels, family=family
+                self.backbones, grid_m, channels=channels, family=family
             )
         return self._densities[key]

@@ -6,7 +6,10 @@ would), with the analytical steady state of linear oscillators at phase
 resonance, so that the expected backbones and model are known exactly.
 """
 
+import argparse
 import json
+import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -17,10 +20,14 @@ from scipy.integrate import cumulative_trapezoid
 
 from identification.measurements.backbone import BackboneSet
 from identification.model import JointModel
-from pm_joint.cli import EXIT_NOT_CONVERGED, main
+from pm_joint import cli
+from pm_joint.cli import EXIT_NOT_CONVERGED, build_parser, main
 from pm_joint.html import missing_links
 from pm_joint.inference import load_posterior
 from surrogates.dataset import BackboneDataset
+
+sys.path.insert(0, str(Path(__file__).parent))
+from browser import assert_page_works, find_browser, require_browser
 
 FS = 10_000.0
 ZETA = 0.005
@@ -290,6 +297,81 @@ def test_the_cli_names_the_samplers_and_population_models_the_library_has():
     assert cli.POPULATION_MODELS == inference.POPULATION_MODELS
 
 
+def test_each_warning_is_printed_once():
+    """Libraries reset Python's once-per-place memory (any catch_warnings block does): the
+    same warning, raised three times from one place, is still printed once."""
+    script = (
+        "import warnings\n"
+        "from pm_joint import cli\n"
+        "def noisy(args):\n"
+        "    for _ in range(3):\n"
+        "        with warnings.catch_warnings():\n"
+        "            pass\n"
+        "        warnings.warn('object mode, again', UserWarning)\n"
+        "    warnings.warn('another one', UserWarning)\n"
+        "cli._cmd_effects = noisy\n"
+        "raise SystemExit(cli.main(['effects']))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=600)  # fmt: skip
+    assert done.returncode == 0, done.stderr[-2000:]
+    lines = done.stderr.splitlines()
+    assert lines.count("pm-joint effects: UserWarning: object mode, again") == 1, lines
+    assert lines.count("pm-joint effects: UserWarning: another one") == 1, lines
+
+
+def _help_of(option: str) -> str:
+    """The ``pm-joint update`` help of one option, as argparse holds it."""
+    parser = build_parser()
+    update = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[
+        "update"
+    ]
+    return next(a.help for a in update._actions if option in a.option_strings)
+
+
+def _defaults_in_words(text: str) -> dict[tuple[str, str], str]:
+    """``"V (p on f, p on f); W (p on f)"`` back into {(p, f): V}."""
+    found = {}
+    for value, pairs in re.findall(r"(\w+) \(([^()]*)\)", text):
+        for population, forward in re.findall(r"(\w+) on (\w+)", pairs):
+            found[population, forward] = value
+    return found
+
+
+def test_update_help_says_the_defaults_the_updating_uses():
+    """The help is generated from SAMPLER_DEFAULTS; read back, it is the table, every pair."""
+    from pm_joint.inference import SAMPLER_DEFAULTS
+    from pm_joint.sampler_defaults import DEFAULT_FORWARD, sampler_reason
+
+    for option, field in (("--sampler", "sampler"), ("--draws", "draws"), ("--tune", "tune")):
+        said = _defaults_in_words(_help_of(option))
+        table = {pair: str(getattr(d, field)) for pair, d in SAMPLER_DEFAULTS.items()}
+        assert said == table, option
+    forward = _help_of("--forward")
+    for population, default in DEFAULT_FORWARD.items():
+        assert f"{default} for {population}" in forward
+        assert (population, default) in SAMPLER_DEFAULTS
+    # The reason a report prints is the table's, for the table's sampler only.
+    for (population, model), default in SAMPLER_DEFAULTS.items():
+        assert default.reason in sampler_reason(population, model, default.sampler)
+        other = next(s for s in cli.SAMPLERS if s != default.sampler)
+        assert sampler_reason(population, model, other) == "chosen by the caller"
+
+
+def test_the_help_check_reads_a_drifted_help_as_drifted():
+    """The reader above is no echo of the generator: a hand-written help reads differently."""
+    from pm_joint.inference import SAMPLER_DEFAULTS
+    from pm_joint.sampler_defaults import default_help
+
+    # The --draws help as it was written by hand before the table made it.
+    drifted = (
+        "draws per chain (default 30000 metropolis, 2000 matching on harmonic, 1000 hierarchical)"
+    )
+    assert _defaults_in_words(drifted) != {p: str(d.draws) for p, d in SAMPLER_DEFAULTS.items()}
+    generated = f"draws per chain (default: {default_help('draws')})"
+    assert _defaults_in_words(generated) == {p: str(d.draws) for p, d in SAMPLER_DEFAULTS.items()}
+
+
 def test_demo_runs_end_to_end_at_small_size(tmp_path):
     done = subprocess.run(
         [sys.executable, "-m", "pm_joint.cli", "demo", "--size", "small", "--out", str(tmp_path)],
@@ -305,3 +387,13 @@ def test_demo_runs_end_to_end_at_small_size(tmp_path):
     for section in ("SINDy identification", "Neural surrogate", "Stochastic updating",
                     "PDFs at low, mid and high amplitude", "Model criticism"):  # fmt: skip
         assert section in page
+    # The criticism leads with each round's finding; the final model's state comes after.
+    criticism = page[page.index('id="model-criticism"') :]
+    assert criticism.index("Round 1 of ") < criticism.index("The final model")
+    assert re.search(r"mean acceptance \d\.\d\d\.", page)  # was 0.26176666666666665
+    # Each warning once (pytensor's object-mode notice came once per compiled function).
+    warned = [line for line in done.stderr.splitlines() if line.startswith("pm-joint demo: ")]
+    assert len(warned) == len(set(warned)), warned
+    # The page in a real browser: every image loads, nothing logged as an error.
+    if find_browser() or os.environ.get("CI") == "true":
+        assert_page_works(index, require_browser())

@@ -421,16 +421,26 @@ def _paths(data, prefix=()):
         yield from _paths(value, (*prefix, key))
 
 
+#: A model's own document: the one generated JSON document that must load.
+VALID_MODEL = JointModel({EFFECT_NAMES[0]: 2.5, EFFECT_NAMES[1]: -1.0}, name="valid")
+VALID_DOCUMENT = json.loads(json.dumps(VALID_MODEL.to_dict()))
+
+
 @PROPERTY
 @given(document=json_values)
+@example(document=VALID_DOCUMENT)
 @counted
 def test_any_json_document_is_a_model_or_a_named_error(folder, document):
     path = folder / "model.json"
     path.write_text(json.dumps(document))
     try:
-        JointModel.from_json(path)
+        loaded = JointModel.from_json(path)
     except ValueError as error:
+        assert document != VALID_DOCUMENT, f"valid input refused: {error}"
         assert _names_source(error, path), str(error)
+        return
+    if document == VALID_DOCUMENT:
+        assert loaded == VALID_MODEL
 
 
 @PROPERTY
@@ -439,6 +449,10 @@ def test_any_json_document_is_a_model_or_a_named_error(folder, document):
 def test_a_hashed_model_file_loads_as_written_or_not_at_all(folder, model, data):
     """Any edit of a file that keeps its hash: the original terms, or a named error."""
     path = model.to_json(folder / "model.json")
+    try:  # the file as written
+        assert JointModel.from_json(path) == model
+    except ValueError as error:
+        raise AssertionError(f"valid input refused: {error}") from None
     original = json.loads(path.read_text())
     edit = data.draw(st.sampled_from(["replace", "truncate"]))
     if edit == "replace":
@@ -533,18 +547,26 @@ def test_spec_numbers_are_checked(key, index, value):
     assert isinstance(outcome, SurrogateSpec) == valid, outcome
 
 
+#: The spec's own fields as JSON: a field set to its own value must load.
+SPEC_JSON = json.loads(json.dumps(SPEC.to_dict()))
+
+
 @PROPERTY
 @given(key=st.sampled_from(SPEC_KEYS), value=json_values)
 @example(key="parameter_names", value=5)
+@example(key="bounds", value=SPEC_JSON["bounds"])
 @counted
 def test_spec_fields_of_any_json_type_are_a_spec_or_a_named_error(key, value):
     outcome = _spec_outcome({**SPEC.to_dict(), key: value})
     assert isinstance(outcome, SurrogateSpec | ValueError)
+    if value == SPEC_JSON[key]:
+        assert isinstance(outcome, SurrogateSpec), f"valid input refused: {outcome}"
 
 
 @PROPERTY
 @given(key=st.sampled_from(["format", "format_version", "onnx", *SPEC_KEYS]), value=json_values)
 @example(key="onnx", value="surrogate.onnx")
+@example(key="parameter_names", value=list(SPEC.parameter_names))
 @counted
 def test_sidecar_fields_of_any_json_type_load_or_name_the_file(surrogate_folder, key, value):
     sidecar = json.loads((surrogate_folder / SIDECAR_FILE).read_text())
@@ -552,6 +574,7 @@ def test_sidecar_fields_of_any_json_type_load_or_name_the_file(surrogate_folder,
     try:
         SurrogateRuntime(graph, {**sidecar, key: value}, source="sidecar.json")
     except ValueError as error:
+        assert value != sidecar[key], f"valid input refused: {error}"
         assert "sidecar.json" in str(error)
 
 
@@ -619,21 +642,29 @@ def measured_matrices(draw):
     return matrix, levels, defect
 
 
+def _density_fit_outcome(matrix, levels, family):
+    """The fitted density's log density at the measured curves, or the ValueError."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # scipy's fitting warns on small samples
+        try:
+            return BackboneDensity.fit(matrix, levels, family=family).logpdf(matrix)
+        except ValueError as error:
+            return error
+
+
 @PROPERTY
 @given(case=measured_matrices(), family=st.sampled_from(["copula", "mvn"]))
 @counted
 def test_density_fit_is_finite_or_a_value_error(case, family):
-    matrix, levels, _ = case
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # scipy's fitting warns on small samples
-        try:
-            density = BackboneDensity.fit(matrix, levels, family=family)
-        except ValueError:
-            return
-        logp = density.logpdf(matrix)
-    assert np.isfinite(matrix).all() and matrix.shape == (len(matrix), LEVELS.size)
-    assert len(matrix) >= 3 and (np.diff(levels) > 0).all()
-    assert np.isfinite(logp).all()
+    """Held to the generated defect: a valid matrix of 3 curves or more is fitted, every
+    defect refused (a fit that refused every input fails here)."""
+    matrix, levels, defect = case
+    outcome = _density_fit_outcome(matrix, levels, family)
+    if defect == "none" and len(matrix) >= 3:
+        assert not isinstance(outcome, ValueError), f"valid input refused: {outcome}"
+        assert np.isfinite(outcome).all()
+    else:
+        assert isinstance(outcome, ValueError), f"{defect}, {len(matrix)} curves: fitted"
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")  # the degenerate level's zero spread
@@ -657,3 +688,48 @@ def test_density_refuses_non_positive_levels_and_degenerate_levels(levels, const
         assert (levels <= 0).any() or constant
         return
     assert (levels > 0).all() and not constant
+
+
+# ---------------------------------------------------------------------------
+# The properties can fail: each, handed a reader that refuses every input, does
+
+
+def _refuse(*args, source: str = "sidecar.json", **kwargs):
+    raise ValueError(f"{source}: refused")
+
+
+@pytest.fixture
+def _cases_kept():
+    """The printed case counts are those of the properties' own runs, not these."""
+    kept = CASES.copy()
+    yield
+    CASES.clear()
+    CASES.update(kept)
+
+
+@pytest.mark.parametrize(
+    ("prop", "owner", "method", "fixtures"),
+    [
+        (test_density_fit_is_finite_or_a_value_error, BackboneDensity, "fit", ()),
+        (test_any_json_document_is_a_model_or_a_named_error, JointModel, "from_dict",
+         ("folder",)),
+        (test_a_hashed_model_file_loads_as_written_or_not_at_all, JointModel, "from_dict",
+         ("folder",)),
+        (test_spec_fields_of_any_json_type_are_a_spec_or_a_named_error, SurrogateSpec,
+         "from_dict", ()),
+        (test_sidecar_fields_of_any_json_type_load_or_name_the_file, SurrogateRuntime,
+         "__init__", ("surrogate_folder",)),
+    ],
+    ids=lambda v: getattr(v, "__name__", ""),
+)  # fmt: skip
+def test_a_property_fails_on_a_reader_that_refuses_everything(
+    prop, owner, method, fixtures, request, _cases_kept
+):
+    """ "A ValueError or the right answer" alone passes a reader that refuses every input:
+    each of these properties also demands that its valid inputs are accepted."""
+    arguments = {name: request.getfixturevalue(name) for name in fixtures}
+    with (
+        mock.patch.object(owner, method, _refuse),
+        pytest.raises(AssertionError, match="valid input refused"),
+    ):
+        prop(**arguments)

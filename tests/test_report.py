@@ -194,3 +194,56 @@ def test_pair_matrices_hold_six_parameters_and_never_one_alone():
     assert [len(g) for g in _pair_groups(names[:12])] == [6, 6]
     assert _pair_groups(names)[-1] == ["k12", "k13"]  # the paper's 12 plus one more
     assert _pair_groups(names[:3]) == [names[:3]]
+
+
+def _round(action, verdict_text, significant, fails, ranking=()):
+    summary = "\n".join([f"model: after {action}", *(f"fails: {f}" for f in fails),
+                         f"verdict: {verdict_text}"])  # fmt: skip
+    return {"action": action, "verdict": verdict_text.split(":")[0], "summary": summary,
+            "verdict_text": verdict_text, "significant": significant,
+            "ranking": list(ranking)}  # fmt: skip
+
+
+def test_the_criticism_section_leads_with_each_rounds_finding(tmp_path):
+    """What was missing and where the model failed come first, round by round; the final
+    model's state ("nothing missing") after them, not instead of them."""
+    from pm_joint.html import criticism_section
+
+    found = {"effect": "microslip", "reading": "softening that saturates", "gain": 812.345678}
+    record = {
+        "significant": False,
+        "equation": "ẍ + k·x = −a_base(t)",
+        "fails_at": [],
+        "history": [],
+        "rounds": [
+            _round("start", "explained by microslip", True,
+                   ["frequency over-predicted between 0.1 and 1 mm"], [found]),
+            _round("+ microslip", "nothing missing beyond the scatter", False,
+                   ["nowhere beyond the scatter"]),
+        ],
+    }  # fmt: skip
+    section = criticism_section(record, tmp_path / "criticism", tmp_path)
+    first, second, final = section.text.split("\n\n")
+    assert first.startswith("Round 1 of 2 (start): explained by microslip.")
+    assert "Where it fails: frequency over-predicted between 0.1 and 1 mm." in first
+    assert "Most likely missing: microslip, softening that saturates." in first
+    assert second.startswith("Round 2 of 2 (+ microslip): nothing missing beyond the scatter.")
+    assert final.startswith("The final model, ẍ + k·x = −a_base(t): Nothing significant missing.")
+    assert section.code.startswith("--- round 1 of 2 (start): explained by microslip\nmodel:")
+    assert [title for title, _ in section.tables][:2] == [
+        "round 1 (start): ranked missing effects",
+        "round 2 (+ microslip): ranked missing effects",
+    ]
+
+
+def test_report_text_formats_its_numbers(tmp_path):
+    from pm_joint.html import _section, posterior_sections
+
+    sampler = {"sampler": "metropolis", "reason": "why", "draws": 600, "chains": 2,
+               "acceptance_rate": 0.26176666666666665}  # fmt: skip
+    content = {"files": [], "summary": [{"variable": "k", "mean": 1.23456789}], "level_pdfs": {},
+               "sampler": sampler}  # fmt: skip
+    (section,) = posterior_sections(content, tmp_path, tmp_path)
+    assert "mean acceptance 0.26." in section.text
+    page = _section(section)
+    assert "1.235" in page and "1.2345" not in page

@@ -140,8 +140,8 @@ def build_model(
     if native_graph and forward == "pll":
         raise ValueError("the PLL simulator has no native pytensor graph (native_graph=True)")
     if density is None:
-        levels = amplitude_levels(measured) if amplitudes_m is None else amplitudes_m
-        density = BackboneDensity.fit(measured, levels, channels=channels, family=family)
+        grid_m = amplitude_levels(measured) if amplitudes_m is None else amplitudes_m
+        density = BackboneDensity.fit(measured, grid_m, channels=channels, family=family)
     elif amplitudes_m is not None:
         raise ValueError("give the likelihood's amplitudes_m or a fitted density, not both")
     if forward == "surrogate":
@@ -270,14 +270,14 @@ def amplitudes_within_surrogate(measured: BackboneSet, runtime: SurrogateRuntime
         amplitude = runtime.amplitude_m(centre)
     low, high = measured.common_range()
     low, high = max(low, float(np.min(amplitude))), min(high, float(np.max(amplitude)))
-    levels = amplitude_levels(measured)
-    inside = levels[(levels >= low) & (levels <= high)]
+    grid_m = amplitude_levels(measured)
+    inside = grid_m[(grid_m >= low) & (grid_m <= high)]
     if inside.size < 3:
         raise ValueError(
             f"the surrogate covers {1e3 * np.min(amplitude):.3g}–{1e3 * np.max(amplitude):.3g} mm "
             f"at the centre of its box: fewer than 3 likelihood levels of the measured range"
         )
-    return np.linspace(inside[0], inside[-1], levels.size)
+    return np.linspace(inside[0], inside[-1], grid_m.size)
 
 
 def hierarchical_model(
@@ -419,10 +419,8 @@ def hierarchical_model(
                 noise = noise * pt.exp(slope * log_relative_amplitude)
             if relative:
                 # Scaled by the measured value, not the predicted one: a noise that follows
-                # the prediction lets the sampler trade fit for noise (demo campaign, all
-                # non-centred, nutpie 2 × 2 000: r̂ 1.83 and 505 divergences scaled by the
-                # prediction, r̂ 1.017 and 1 divergence by the measurement); at 2 % noise
-                # the two scales differ by about 2 %.
+                # the prediction lets the sampler trade fit for noise (chains that diverge
+                # and do not mix); at 2 % noise the two scales differ by about 2 %.
                 noise = noise * np.abs(scored)
             pm.Normal(channel, predicted, noise, observed=observed, dims="point")
     pm_model.population_model = HIERARCHICAL  # sample() keeps it with the draws
@@ -471,12 +469,12 @@ def _curve_points(
         frequency = np.concatenate([b.frequency_hz for b in measured])
         damping = np.concatenate([b.damping_ratio for b in measured])
     else:
-        levels = np.asarray(amplitudes_m, dtype=float)
-        amplitudes = [levels[(levels >= b.amplitude_m.min()) & (levels <= b.amplitude_m.max())]
+        grid_m = np.asarray(amplitudes_m, dtype=float)
+        amplitudes = [grid_m[(grid_m >= b.amplitude_m.min()) & (grid_m <= b.amplitude_m.max())]
                       for b in measured]  # fmt: skip
         empty = [b.label for b, a in zip(measured, amplitudes, strict=True) if a.size == 0]
         if empty:
-            raise ValueError(f"curves {empty} reach none of the amplitude levels {levels} m")
+            raise ValueError(f"curves {empty} reach none of the amplitude levels {grid_m} m")
         pairs = list(zip(measured, amplitudes, strict=True))
         frequency = np.concatenate([b.frequency_at(a) for b, a in pairs])
         damping = np.concatenate([b.damping_at(a) for b, a in pairs])

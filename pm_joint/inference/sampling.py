@@ -24,6 +24,12 @@ from pm_joint.inference.models import HIERARCHICAL
 from pm_joint.inference.steps import CovarianceMetropolis, KeptLogp
 from pm_joint.inference.storage import attach_density, load_posterior
 from pm_joint.inference.traces import DrawWriter, start_trace
+from pm_joint.sampler_defaults import (
+    GRADIENT_SAMPLERS,
+    POPULATION_MODELS,
+    SAMPLER_DEFAULTS,
+    SAMPLERS,
+)
 
 __all__ = [
     "GRADIENT_SAMPLERS",
@@ -35,42 +41,10 @@ __all__ = [
     "sample",
 ]
 
-#: The samplers by name.
-SAMPLERS = ("metropolis", "demetropolisz", "nuts", "nutpie")
-#: The samplers that need the gradient (a forward model that is a native pytensor graph).
-GRADIENT_SAMPLERS = ("nuts", "nutpie")
 #: Target acceptance of a gradient sampler on the hierarchical model: closer to 1 than PyMC's
-#: 0.8 because population spreads near 0 make a funnel where large steps diverge (the full
-#: demo's hierarchical stage, nutpie 2 × 4 000 at 0.8: 7 divergences); the coverage bench
-#: and its CI test are calibrated at this value.
+#: 0.8 because population spreads near 0 make a funnel where large steps diverge; the coverage
+#: bench (bench/results/population_coverage.json) and its CI test are calibrated at this value.
 HIERARCHICAL_TARGET_ACCEPT = 0.95
-#: The population models of ``pm-joint update --population``.
-POPULATION_MODELS = ("matching", "hierarchical")
-#: Sampler, draws and tuning steps per chain, and why that sampler, by (population model,
-#: forward model). The reason is printed with every run (CLI, report).
-SAMPLER_DEFAULTS = {
-    ("matching", "surrogate"): {
-        "sampler": "metropolis", "draws": 30_000, "tune": 3_000,
-        "reason": "the paper's sampler, its proposal covariance learned while tuning, "
-        "proposing in the prior box's coordinates",
-    },
-    ("matching", "pll"): {
-        "sampler": "metropolis", "draws": 30_000, "tune": 3_000,
-        "reason": "the PLL simulator has no gradient: the paper's Metropolis, its proposal "
-        "covariance learned while tuning, proposing in the prior box's coordinates",
-    },
-    ("matching", "harmonic"): {
-        "sampler": "demetropolisz", "draws": 30_000, "tune": 5_000,
-        "reason": "the best min-ESS/s measured on this forward model: DEMetropolisZ 195/s "
-        "against pm-joint's Metropolis 154, PyMC's NUTS 130 and nutpie 92 on a 5-parameter "
-        "rig posterior (bench/results/sampling.json, 2026-11-26)",
-    },
-    ("hierarchical", "harmonic"): {
-        "sampler": "nutpie", "draws": 1_000, "tune": 1_000,
-        "reason": "a parameter vector per curve (over a hundred dimensions): gradient "
-        "samplers only, nutpie's NUTS the fastest",
-    },
-}  # fmt: skip
 
 
 def sample(

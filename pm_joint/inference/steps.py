@@ -3,8 +3,8 @@
 The paper samples with PyMC's Metropolis, one scalar coordinate at a time with
 a scale tuned per coordinate. On a posterior whose parameters are correlated
 (as the population-matching posterior is: several parameters move the
-backbone alike) such chains crawl: the demo's 2 × 15 000 draws ended with r̂ up
-to 1.16 and bulk ESS of 16–118. :class:`CovarianceMetropolis` keeps PyMC's
+backbone alike) such chains crawl (bench/results/sampling.json compares the
+samplers). :class:`CovarianceMetropolis` keeps PyMC's
 Metropolis (its proposal, acceptance and scale tuning) and adds what PyMC's
 Metropolis takes but does not learn, a proposal covariance: the first part of
 tuning is the paper's coordinate-wise Metropolis (a pilot run), then the
@@ -18,8 +18,8 @@ The chain walks in the prior box's own linear coordinates (``coordinates=
 "box"``, the default): a uniform prior's value variable in PyMC is the logit
 of the box fraction, and a ridge that is straight in the parameters (several
 parameters moving the prediction alike, cut off by the box) is curved there,
-where no single proposal covariance follows it (a known-answer test:
-min bulk ESS 47 in logit coordinates, 832 in box fractions, same draws). The
+where no single proposal covariance follows it (a known-answer test in
+tests/test_convergence.py compares the two coordinates on the same draws). The
 step maps each bounded coordinate to its box fraction ``u = sigmoid(z)``,
 proposes there, rejects a proposal outside the box without evaluating the
 model, and scores the rest by the log density in ``u`` (the model's, plus the

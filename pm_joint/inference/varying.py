@@ -3,9 +3,9 @@
 A parameter whose assembly-to-assembly change does not move a curve beyond the
 scatter of the measured curves cannot be learnt per assembly: its per-curve
 values are set by the prior, and in the centred hierarchical model they couple
-with the population spread into a funnel that NUTS crawls through (the full demo's
-campaign with all seven SINDy coefficients varying had not finished 2 × 1 000
-draws after 30 minutes). Such parameters are held at the template's values and
+with the population spread into a funnel that NUTS crawls through (on the full
+demo's campaign with every SINDy coefficient varying, far slower than the demo
+itself). Such parameters are held at the template's values and
 the rest vary.
 
 The choice is a subset selection by QR with column pivoting (Golub & Van Loan,
@@ -101,15 +101,15 @@ def varying_parameters(
     """
     names = list(names)
     low, high = measured.common_range()
-    levels = np.geomspace(low, high, n_amplitudes)
-    scatter = assembly_scatter(measured, levels)
+    amplitudes_m = np.geomspace(low, high, n_amplitudes)
+    scatter = assembly_scatter(measured, amplitudes_m)
     theta0 = np.array([model.parameters[n] for n in names], dtype=float)
     step = 1e-3  # in log θ: small against any curvature of the backbone, large against rounding
     sets = np.repeat(theta0[None, :], 2 * len(names), axis=0)
     for j in range(len(names)):
         sets[2 * j, j] *= np.exp(step)
         sets[2 * j + 1, j] *= np.exp(-step)
-    curves = backbone(model, levels, parameters=sets, names=names, method="single")
+    curves = backbone(model, amplitudes_m, parameters=sets, names=names, method="single")
     rows = []
     for channel in channels:
         values = getattr(curves, channel)
