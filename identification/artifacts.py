@@ -30,10 +30,12 @@ __all__ = [
     "atomic_write_text",
     "canonical_json",
     "check_sha256",
+    "read_json_document",
     "sha256_bytes",
     "sha256_file",
     "sha256_json",
     "versions",
+    "write_json_document",
 ]
 
 #: Distributions whose versions every artifact records.
@@ -134,3 +136,21 @@ def versions(*packages: str) -> dict[str, str | None]:
         except metadata.PackageNotFoundError:
             found[package] = None
     return found
+
+
+def write_json_document(path: str | Path, data: dict[str, Any]) -> Path:
+    """Write ``data`` as indented JSON (atomically), with the versions writing it."""
+    data = {**data, "versions": versions()}
+    return atomic_write_text(path, json.dumps(data, indent=2, ensure_ascii=False) + "\n")
+
+
+def read_json_document(path: str | Path, what: str) -> Any:
+    """The JSON content of ``path``; ValueError naming the file (and ``what`` it should hold)
+    when it cannot be read or is not JSON."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read the {what} file ({exc.strerror})") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: not valid JSON ({exc})") from None

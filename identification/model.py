@@ -18,7 +18,6 @@ units (:mod:`identification.measurements.forcing`), so it is not among the
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -27,7 +26,12 @@ from typing import Any
 
 import numpy as np
 
-from identification.artifacts import atomic_write_text, check_sha256, sha256_json, versions
+from identification.artifacts import (
+    check_sha256,
+    read_json_document,
+    sha256_json,
+    write_json_document,
+)
 from identification.effects import (
     CATALOGUE,
     LINEAR_STIFFNESS,
@@ -403,20 +407,12 @@ class JointModel:
 
     def to_json(self, path: str | Path) -> Path:
         """Write the model as JSON (atomically), with its hash and the versions writing it."""
-        data = {**self.to_dict(), "versions": versions()}
-        return atomic_write_text(path, json.dumps(data, indent=2, ensure_ascii=False) + "\n")
+        return write_json_document(path, self.to_dict())
 
     @classmethod
     def from_json(cls, path: str | Path) -> JointModel:
         """Read a model written by :meth:`to_json`; ValueError naming the file if it is bad."""
-        path = Path(path)
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise ValueError(f"{path}: cannot read the model file ({exc.strerror})") from None
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise ValueError(f"{path}: not valid JSON ({exc})") from None
-        return cls.from_dict(data, source=str(path))
+        return cls.from_dict(read_json_document(path, "model"), source=str(path))
 
     # ----------------------------------------------------------------- presets
     @classmethod

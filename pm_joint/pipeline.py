@@ -24,7 +24,7 @@ import numpy as np
 import xarray as xr
 
 from identification.analytical import harmonic, pll
-from identification.criticism.criticism import run_rounds
+from identification.criticism.moves import run_rounds
 from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.columns import ColumnCampaign

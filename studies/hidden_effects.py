@@ -12,7 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from identification.criticism.criticism import Criticism, criticize, run_rounds
+from identification.criticism.criticism import Criticism, criticize
+from identification.criticism.moves import run_rounds
 from identification.effects import CATALOGUE, LINEAR_STIFFNESS, VISCOUS_DAMPING
 from identification.fitting.fitter import Fitter
 from identification.fitting.least_squares import FitResult

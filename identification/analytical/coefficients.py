@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike
 
 from identification.effects import CATALOGUE, HYSTERETIC, LINEAR_STIFFNESS
 from identification.model import JointModel
+from identification.parameter_sets import checked_column, checked_sets
 
 __all__ = ["CoefficientTable", "coefficient_table", "small_amplitude_stiffness"]
 
@@ -89,21 +90,12 @@ def coefficient_table(
     indices, coefficients, shapes = model.kernel_arrays()
     hysteretic = np.array(model.microslip_arrays(), dtype=float)
     has_hysteretic = model.hysteretic_term is not None
-    if parameters is None:
-        if names is not None:
-            raise ValueError("names given without parameters")
+    checked = checked_sets(parameters, names)
+    if checked is None:
         return CoefficientTable(
             indices, coefficients[None], shapes[None], hysteretic[None], has_hysteretic
         )
-    if names is None:
-        raise ValueError("parameters given without names (the column names)")
-    names = list(names)
-    values = np.asarray(parameters, dtype=float)
-    if values.ndim != 2 or values.shape[1] != len(names) or values.shape[0] == 0:
-        raise ValueError(
-            f"parameters must have shape (n_sets, {len(names)}) for names {names}, "
-            f"got {values.shape}"
-        )
+    values, names = checked
     n_sets = values.shape[0]
     arrays = {
         "coefficients": np.repeat(coefficients[None], n_sets, axis=0),
@@ -111,15 +103,8 @@ def coefficient_table(
         "hysteretic": np.repeat(hysteretic[None], n_sets, axis=0),
     }
     locations = _parameter_locations(model)
-    if len(set(names)) != len(names):
-        raise ValueError(f"parameter names repeat: {names}")
     for column, name in enumerate(names):
-        if name not in locations:
-            raise ValueError(f"unknown parameter {name!r}; the model has {model.parameter_names}")
-        column_values = values[:, column]
-        bad = np.flatnonzero(~np.isfinite(column_values))
-        if bad.size:
-            raise ValueError(f"parameter {name!r} is not finite in set {bad[0]}")
+        column_values = checked_column(values, column, name, model.parameter_names)
         is_shape = "." in name
         if is_shape and np.any(column_values <= 0):
             row = np.flatnonzero(column_values <= 0)[0]

@@ -37,6 +37,7 @@ from numpy.typing import ArrayLike
 
 from identification.effects import Effect, get_effect, jenkins_force
 from identification.multimode.model import ModalModel
+from identification.parameter_sets import checked_column, checked_sets
 
 __all__ = [
     "HarmonicGrid",
@@ -218,32 +219,13 @@ def modal_arrays(
         "element_coefficients": np.array([e.coefficient for e in model.elements]),
         "coupling_coefficients": np.array([c.coefficient for c in model.couplings]),
     }
-    if parameters is None:
-        if names is not None:
-            raise ValueError("names given without parameters")
-        values, names = np.zeros((1, 0)), []
-    else:
-        if names is None:
-            raise ValueError("parameters given without names (the column names)")
-        names = list(names)
-        values = np.asarray(parameters, dtype=float)
-        if values.ndim != 2 or values.shape[1] != len(names) or values.shape[0] == 0:
-            raise ValueError(
-                f"parameters must have shape (n_sets, {len(names)}) for names {names}, "
-                f"got {values.shape}"
-            )
-        if len(set(names)) != len(names):
-            raise ValueError(f"parameter names repeat: {names}")
+    checked = checked_sets(parameters, names)
+    values, names = (np.zeros((1, 0)), []) if checked is None else checked
     n_sets = values.shape[0]
     arrays = {key: np.repeat(value[None], n_sets, axis=0) for key, value in base.items()}
     locations = _parameter_locations(model)
     for column, name in enumerate(names):
-        if name not in locations:
-            raise ValueError(f"unknown parameter {name!r}; the model has {model.parameter_names}")
-        column_values = values[:, column]
-        bad = np.flatnonzero(~np.isfinite(column_values))
-        if bad.size:
-            raise ValueError(f"parameter {name!r} is not finite in set {bad[0]}")
+        column_values = checked_column(values, column, name, model.parameter_names)
         key, position = locations[name]
         arrays[key][(slice(None), *position)] = column_values
     if np.any(arrays["frequency"] <= 0) or np.any(arrays["zeta"] < 0):
