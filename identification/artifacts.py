@@ -26,6 +26,7 @@ from typing import Any
 __all__ = [
     "DEFAULT_PACKAGES",
     "IntegrityError",
+    "JsonDocument",
     "atomic_write_bytes",
     "atomic_write_text",
     "canonical_json",
@@ -154,3 +155,21 @@ def read_json_document(path: str | Path, what: str) -> Any:
         raise ValueError(f"{path}: cannot read the {what} file ({exc.strerror})") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path}: not valid JSON ({exc})") from None
+
+
+class JsonDocument:
+    """``to_json`` / ``from_json`` for a record that has ``to_dict`` and
+    ``from_dict(data, source=...)`` (the models): the file is written atomically with the
+    versions writing it, and a file that cannot be read is named in the error."""
+
+    #: What the file holds, in error messages.
+    document = "model"
+
+    def to_json(self, path: str | Path) -> Path:
+        """Write the record as JSON (atomically), with its hash and the versions writing it."""
+        return write_json_document(path, self.to_dict())
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> Any:
+        """Read a record written by :meth:`to_json`; ValueError naming the file if it is bad."""
+        return cls.from_dict(read_json_document(path, cls.document), source=str(path))

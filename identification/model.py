@@ -21,16 +21,14 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from identification.artifacts import (
+    JsonDocument,
     check_sha256,
-    read_json_document,
     sha256_json,
-    write_json_document,
 )
 from identification.effects import (
     CATALOGUE,
@@ -74,7 +72,7 @@ class Term:
         return CATALOGUE[self.effect].hysteretic
 
 
-class JointModel:
+class JointModel(JsonDocument):
     """A 1-DOF joint model ``ẍ + Σ c_i φ_i(x, ẋ) = −a_base``.
 
     Parameters
@@ -404,15 +402,6 @@ class JointModel:
                 hint=" (remove 'content_sha256' to accept a deliberate edit)",
             )
         return model
-
-    def to_json(self, path: str | Path) -> Path:
-        """Write the model as JSON (atomically), with its hash and the versions writing it."""
-        return write_json_document(path, self.to_dict())
-
-    @classmethod
-    def from_json(cls, path: str | Path) -> JointModel:
-        """Read a model written by :meth:`to_json`; ValueError naming the file if it is bad."""
-        return cls.from_dict(read_json_document(path, "model"), source=str(path))
 
     # ----------------------------------------------------------------- presets
     @classmethod

@@ -32,16 +32,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from identification.artifacts import (
+    JsonDocument,
     check_sha256,
-    read_json_document,
     sha256_json,
-    write_json_document,
 )
 from identification.effects import LINEAR_STIFFNESS, VISCOUS_DAMPING, get_effect
 from identification.model import JointModel
@@ -173,7 +171,7 @@ class Coupling:
 
 
 @dataclass(frozen=True)
-class ModalModel:
+class ModalModel(JsonDocument):
     """N modal oscillators coupled through joint elements and polynomial couplings.
 
     Attributes
@@ -419,15 +417,6 @@ class ModalModel:
                 hint=" (remove 'content_sha256' to accept a deliberate edit)",
             )
         return model
-
-    def to_json(self, path: str | Path) -> Path:
-        """Write the model as JSON (atomically), with its hash and the versions writing it."""
-        return write_json_document(path, self.to_dict())
-
-    @classmethod
-    def from_json(cls, path: str | Path) -> ModalModel:
-        """Read a model written by :meth:`to_json`; ValueError naming the file if it is bad."""
-        return cls.from_dict(read_json_document(path, "model"), source=str(path))
 
 
 def _list(data: Mapping[str, Any], key: str, source: str) -> list[Any]:
