@@ -39,7 +39,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -330,8 +329,7 @@ def _setup(
     shapes = np.eye(n) if sensors is None else np.asarray(sensors, dtype=float)
     if shapes.ndim != 2 or shapes.shape[1] != n or not np.all(np.isfinite(shapes)):
         raise ValueError(
-            f"sensors must be a finite (n_sensors, {n}) mode-shape matrix, got shape "
-            f"{shapes.shape}"
+            f"sensors must be a finite (n_sensors, {n}) mode-shape matrix, got shape {shapes.shape}"
         )
     if lock_sensor is None:
         lock = np.eye(n)[target]
@@ -509,7 +507,3 @@ def modal_pll_backbones(
                               setup.lock, setup.target, setup.control, setup.settings,
                               excitation, out)  # fmt: skip
     return _result(mode, excitation, out, n)
-
-
-
-

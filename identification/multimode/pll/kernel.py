@@ -97,8 +97,8 @@ def _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, eta, eta_do
     """``acc[m] = η̈_m`` at ``(η, η̇)`` under excitation ``u``; hysteretic elements from anchors."""
     n = eta.size
     for m in range(n):
-        acc[m] = modal[m, _WEIGHT] * u - modal[m, _DAMPER] * eta_dot[m] - modal[m, _STIFFNESS] * (
-            eta[m]
+        acc[m] = (
+            modal[m, _WEIGHT] * u - modal[m, _DAMPER] * eta_dot[m] - modal[m, _STIFFNESS] * (eta[m])
         )
     for e in range(el_int.shape[0]):
         j = el_int[e, 1]
@@ -298,9 +298,7 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
             next_boundary += 2.0 * np.pi
             magnitude = np.hypot(detector[1], detector[2])
             # Power balance of the locked mode from the detector: |w_t| |U| / (2ω²|Q_t|).
-            damping = (
-                weight * lock_gain * amplitude * omega**sensing / (2.0 * omega**2 * magnitude)
-            )
+            damping = weight * lock_gain * amplitude * omega**sensing / (2.0 * omega**2 * magnitude)
             change = abs(magnitude - magnitude_previous) / magnitude
             steady = change <= settling_tolerance * 2.0 * np.pi * damping
             ok = abs(error) <= tolerance and steady and omega_low < omega < omega_high
