@@ -166,6 +166,40 @@ def _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, eta, eta_dot, xa,
                 xa[e] = q
 
 
+@numba.njit(cache=True, inline="always")
+def _detect(detector, y, s, c, harmonics, mu_dt):
+    """One LMS step of the one-mode loop's adaptive Fourier detector; the fundamental's phase.
+
+    ``detector`` holds ``c₀, a₁, b₁, …``; ``s, c`` are ``sin θ, cos θ``; the fit is
+    ``y₁ = |Y| sin(θ + phase)``.
+    """
+    fit = detector[0] + detector[1] * s + detector[2] * c
+    sk, ck = s, c
+    for i in range(3, 2 * harmonics + 1, 2):
+        sk, ck = sk * c + ck * s, ck * c - sk * s
+        fit += detector[i] * sk + detector[i + 1] * ck
+    residual = mu_dt * (y - fit)
+    detector[0] += 0.5 * residual  # the mean's gain halved: same time constant 2/μ
+    detector[1] += residual * s
+    detector[2] += residual * c
+    sk, ck = s, c
+    for i in range(3, 2 * harmonics + 1, 2):
+        sk, ck = sk * c + ck * s, ck * c - sk * s
+        detector[i] += residual * sk
+        detector[i + 1] += residual * ck
+    return np.arctan2(detector[2], detector[1])
+
+
+@numba.njit(cache=True, inline="always")
+def _excitation_samples(forcing, u, a_from, a_to, k, ramp, theta, step):
+    """The excitation at the RK4 half sub-steps of sample ``k`` (phase advancing by ``step``)."""
+    n_half = forcing.size - 1
+    forcing[0] = u
+    for j in range(1, n_half + 1):
+        fraction = j / n_half
+        forcing[j] = _ramp(a_from, a_to, k + fraction, ramp) * np.sin(theta + step * fraction)
+
+
 @numba.njit(cache=True)
 def initial_state(omega, harmonics, n_modes, n_elements):
     """State vector at rest: oscillator at ``omega``, detector, ``η, η̇`` and anchors zero."""
@@ -257,22 +291,7 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
             result[_DIVERGED] = 1.0
             break
 
-        # Adaptive Fourier detector, as in the one-mode loop.
-        fit = detector[0] + detector[1] * s + detector[2] * c
-        sk, ck = s, c
-        for i in range(3, 2 * harmonics + 1, 2):
-            sk, ck = sk * c + ck * s, ck * c - sk * s
-            fit += detector[i] * sk + detector[i + 1] * ck
-        residual = mu_dt * (y - fit)
-        detector[0] += 0.5 * residual
-        detector[1] += residual * s
-        detector[2] += residual * c
-        sk, ck = s, c
-        for i in range(3, 2 * harmonics + 1, 2):
-            sk, ck = sk * c + ck * s, ck * c - sk * s
-            detector[i] += residual * sk
-            detector[i + 1] += residual * ck
-        phase = np.arctan2(detector[2], detector[1])
+        phase = _detect(detector, y, s, c, harmonics, mu_dt)
         error = _wrap(phase - target)
 
         if control_on:
@@ -333,12 +352,7 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
                     q_modes[m, h] += eta[m] * turn
                 turn *= complex(c, -s)
 
-        forcing[0] = u
-        for j in range(1, 2 * n_sub + 1):
-            fraction = j / (2.0 * n_sub)
-            forcing[j] = _ramp(a_from, a_to, k + fraction, ramp) * np.sin(
-                theta + omega * dt * fraction
-            )
+        _excitation_samples(forcing, u, a_from, a_to, k, ramp, theta, omega * dt)
         _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, eta, eta_dot, xa, fa, acc,
                  dt / n_sub, forcing, work)  # fmt: skip
         theta = theta + omega * dt
