@@ -80,8 +80,10 @@ PARTICIPATION_HARMONICS = 3
 _N_COEFFICIENTS = 2 * PARTICIPATION_HARMONICS + 1
 #: Columns of ``modal``.
 _STIFFNESS, _DAMPER, _WEIGHT = range(3)
-#: Rows of the RK4 work array.
-_ACC0, _X2, _V2, _ACC2, _X3, _V3, _ACC3, _X4, _V4, _ACC4, _N_WORK = range(11)
+#: Rows of the work array: the state η, η̇, η̈, then the RK4 stages.
+(
+    _X, _V, _ACC, _ACC0, _X2, _V2, _ACC2, _X3, _V3, _ACC3, _X4, _V4, _ACC4, _N_WORK,
+) = range(14)  # fmt: skip
 #: Recorded channels besides the modal ones (then η, η̇, η̈ of every mode).
 CHANNELS = (
     "base_acceleration", "base_velocity", "frequency_hz", "phase", "response_phase_deg", "level",
@@ -92,76 +94,113 @@ _THETA, _OMEGA, _INTEGRAL, _CONTROL_ON, _DETECTOR = range(5)
 
 
 @numba.njit(cache=True, inline="always")
-def _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, eta, eta_dot, xa, fa, u,
-                   acc):  # fmt: skip
-    """``acc[m] = η̈_m`` at ``(η, η̇)`` under excitation ``u``; hysteretic elements from anchors."""
-    n = eta.size
+def _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, x, v, xa, fa, u, out):
+    """``work[out, m] = η̈_m`` at ``η = work[x]``, ``η̇ = work[v]`` under excitation ``u``.
+
+    Rows of one 2-D work array rather than separate arrays: slicing rows in the
+    hot loop would cost atomic reference counts at every stage of every step.
+    Hysteretic elements are evaluated from their anchors.
+    """
+    n = work.shape[1]
     for m in range(n):
-        acc[m] = (
-            modal[m, _WEIGHT] * u - modal[m, _DAMPER] * eta_dot[m] - modal[m, _STIFFNESS] * (eta[m])
+        work[out, m] = (
+            modal[m, _WEIGHT] * u
+            - modal[m, _DAMPER] * work[v, m]
+            - modal[m, _STIFFNESS] * work[x, m]
         )
     for e in range(el_int.shape[0]):
         j = el_int[e, 1]
         q = 0.0
         q_dot = 0.0
         for m in range(n):
-            q += shapes[j, m] * eta[m]
-            q_dot += shapes[j, m] * eta_dot[m]
+            q += shapes[j, m] * work[x, m]
+            q_dot += shapes[j, m] * work[v, m]
         if el_int[e, 2]:
             g = el_float[e, 0] * jenkins_force(q, xa[e], fa[e], el_float[e, 1], el_float[e, 2])
         else:
             g = el_float[e, 0] * memoryless_force(el_int[e, 0], q, q_dot, el_float[e, 1],
                                                   el_float[e, 2])  # fmt: skip
         for m in range(n):
-            acc[m] -= shapes[j, m] * g
+            work[out, m] -= shapes[j, m] * g
     for i in range(cp_int.shape[0]):
         term = cp_coef[i]
         for k in range(n):
             for _ in range(cp_int[i, 1 + k]):
-                term *= eta[k]
-        acc[cp_int[i, 0]] -= term
+                term *= work[x, k]
+        work[out, cp_int[i, 0]] -= term
 
 
 @numba.njit(cache=True, inline="always")
-def _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, eta, eta_dot, xa, fa, acc, h,
-             forcing, work):  # fmt: skip
-    """RK4 over ``len(forcing) // 2`` sub-steps of ``h``, in place on ``η, η̇`` and the anchors.
+def _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing):
+    """RK4 over ``len(forcing) // 2`` sub-steps of ``h``, in place on ``work[_X], work[_V]``.
 
-    ``acc`` holds the accelerations at the start, ``forcing[j]`` the excitation at
-    ``j·h/2``; ``work`` is ``(_N_WORK, N)`` scratch.
+    ``work[_ACC]`` holds the accelerations at the start, ``forcing[j]`` the
+    excitation at ``j·h/2``; the other rows of ``work`` are the stages. The anchors
+    ``xa, fa`` move to the accepted state after each sub-step.
     """
-    n = eta.size
-    acc0, acc2, acc3, acc4 = work[_ACC0], work[_ACC2], work[_ACC3], work[_ACC4]
-    x2, v2, x3, v3, x4, v4 = work[_X2], work[_V2], work[_X3], work[_V3], work[_X4], work[_V4]
-    acc0[:] = acc
+    n = work.shape[1]
+    for m in range(n):
+        work[_ACC0, m] = work[_ACC, m]
     for j in range(forcing.size // 2):
         if j > 0:
-            _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, eta, eta_dot, xa,
-                           fa, forcing[2 * j], acc0)  # fmt: skip
+            _accelerations(
+                modal,
+                shapes,
+                el_int,
+                el_float,
+                cp_int,
+                cp_coef,
+                work,
+                _X,
+                _V,
+                xa,
+                fa,
+                forcing[2 * j],
+                _ACC0,
+            )
         a_mid = forcing[2 * j + 1]
         for m in range(n):
-            x2[m] = eta[m] + 0.5 * h * eta_dot[m]
-            v2[m] = eta_dot[m] + 0.5 * h * acc0[m]
-        _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, x2, v2, xa, fa, a_mid,
-                       acc2)  # fmt: skip
+            work[_X2, m] = work[_X, m] + 0.5 * h * work[_V, m]
+            work[_V2, m] = work[_V, m] + 0.5 * h * work[_ACC0, m]
+        _accelerations(
+            modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X2, _V2, xa, fa, a_mid, _ACC2
+        )
         for m in range(n):
-            x3[m] = eta[m] + 0.5 * h * v2[m]
-            v3[m] = eta_dot[m] + 0.5 * h * acc2[m]
-        _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, x3, v3, xa, fa, a_mid,
-                       acc3)  # fmt: skip
+            work[_X3, m] = work[_X, m] + 0.5 * h * work[_V2, m]
+            work[_V3, m] = work[_V, m] + 0.5 * h * work[_ACC2, m]
+        _accelerations(
+            modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X3, _V3, xa, fa, a_mid, _ACC3
+        )
         for m in range(n):
-            x4[m] = eta[m] + h * v3[m]
-            v4[m] = eta_dot[m] + h * acc3[m]
-        _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, x4, v4, xa, fa,
-                       forcing[2 * j + 2], acc4)  # fmt: skip
+            work[_X4, m] = work[_X, m] + h * work[_V3, m]
+            work[_V4, m] = work[_V, m] + h * work[_ACC3, m]
+        _accelerations(
+            modal,
+            shapes,
+            el_int,
+            el_float,
+            cp_int,
+            cp_coef,
+            work,
+            _X4,
+            _V4,
+            xa,
+            fa,
+            forcing[2 * j + 2],
+            _ACC4,
+        )
         for m in range(n):
-            eta[m] = eta[m] + h / 6.0 * (eta_dot[m] + 2.0 * v2[m] + 2.0 * v3[m] + v4[m])
-            eta_dot[m] = eta_dot[m] + h / 6.0 * (acc0[m] + 2.0 * acc2[m] + 2.0 * acc3[m] + acc4[m])
+            work[_X, m] = work[_X, m] + h / 6.0 * (
+                work[_V, m] + 2.0 * work[_V2, m] + 2.0 * work[_V3, m] + work[_V4, m]
+            )
+            work[_V, m] = work[_V, m] + h / 6.0 * (
+                work[_ACC0, m] + 2.0 * work[_ACC2, m] + 2.0 * work[_ACC3, m] + work[_ACC4, m]
+            )
         for e in range(el_int.shape[0]):
             if el_int[e, 2]:
                 q = 0.0
                 for m in range(n):
-                    q += shapes[el_int[e, 1], m] * eta[m]
+                    q += shapes[el_int[e, 1], m] * work[_X, m]
                 fa[e] = jenkins_force(q, xa[e], fa[e], el_float[e, 1], el_float[e, 2])
                 xa[e] = q
 
@@ -247,12 +286,12 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
     control_on = state[_CONTROL_ON] > 0.0
     detector = state[_DETECTOR : _DETECTOR + 1 + 2 * harmonics]
     offset = _DETECTOR + 1 + 2 * harmonics
-    eta = state[offset : offset + n]
-    eta_dot = state[offset + n : offset + 2 * n]
     xa = state[offset + 2 * n : offset + 2 * n + n_elements]
     fa = state[offset + 2 * n + n_elements : offset + 2 * n + 2 * n_elements]
-    acc = np.empty(n)
     work = np.empty((_N_WORK, n))
+    for m in range(n):
+        work[_X, m] = state[offset + m]
+        work[_V, m] = state[offset + n + m]
     forcing = np.empty(2 * n_sub + 1)
     q_modes = np.zeros((n, PARTICIPATION_HARMONICS + 1), dtype=np.complex128)
     result[:] = np.nan
@@ -274,19 +313,19 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
         s, c = np.sin(theta), np.cos(theta)
         amplitude = _ramp(a_from, a_to, k, ramp)
         u = amplitude * s
-        _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, eta, eta_dot, xa, fa, u,
-                       acc)  # fmt: skip
+        _accelerations(
+            modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V, xa, fa, u, _ACC
+        )
         y = 0.0
         finite = True
         for m in range(n):
-            if not (abs(eta[m]) <= x_max and np.isfinite(eta_dot[m]) and np.isfinite(acc[m])):
+            if not (
+                abs(work[_X, m]) <= x_max
+                and np.isfinite(work[_V, m])
+                and np.isfinite(work[_ACC, m])
+            ):
                 finite = False
-            if sensing == 0:
-                y += lock[m] * eta[m]
-            elif sensing == 1:
-                y += lock[m] * eta_dot[m]
-            else:
-                y += lock[m] * acc[m]
+            y += lock[m] * work[sensing, m]  # rows _X, _V, _ACC are the sensings' order
         if not finite:
             result[_DIVERGED] = 1.0
             break
@@ -306,9 +345,8 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
             record[4, k] = np.degrees(_wrap(phase - settings[_REFERENCE]))
             record[5, k] = amplitude
             for m in range(n):
-                record[n_channels + m, k] = eta[m]
-                record[n_channels + n + m, k] = eta_dot[m]
-                record[n_channels + 2 * n + m, k] = acc[m]
+                for row in range(3):
+                    record[n_channels + row * n + m, k] = work[row, m]
 
         if k == ramp:
             control_on = True
@@ -346,15 +384,16 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
             q_base += u * rotation
             turn = rotation
             for m in range(n):
-                q_modes[m, 0] += eta[m] * step
+                q_modes[m, 0] += work[_X, m] * step
             for h in range(1, PARTICIPATION_HARMONICS + 1):
                 for m in range(n):
-                    q_modes[m, h] += eta[m] * turn
+                    q_modes[m, h] += work[_X, m] * turn
                 turn *= complex(c, -s)
 
         _excitation_samples(forcing, u, a_from, a_to, k, ramp, theta, omega * dt)
-        _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, eta, eta_dot, xa, fa, acc,
-                 dt / n_sub, forcing, work)  # fmt: skip
+        _advance(
+            modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, dt / n_sub, forcing
+        )
         theta = theta + omega * dt
         k += 1
         if done or k - ramp >= max_hold:
@@ -362,6 +401,9 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
 
     state[_THETA], state[_OMEGA], state[_INTEGRAL] = theta, omega, integral
     state[_CONTROL_ON] = 1.0 if control_on else 0.0
+    for m in range(n):
+        state[offset + m] = work[_X, m]
+        state[offset + n + m] = work[_V, m]
     result[_N_SAMPLES] = k
     if done:
         frequency = n_periods / duration
