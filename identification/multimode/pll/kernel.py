@@ -143,52 +143,19 @@ def _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, 
         work[_ACC0, m] = work[_ACC, m]
     for j in range(forcing.size // 2):
         if j > 0:
-            _accelerations(
-                modal,
-                shapes,
-                el_int,
-                el_float,
-                cp_int,
-                cp_coef,
-                work,
-                _X,
-                _V,
-                xa,
-                fa,
-                forcing[2 * j],
-                _ACC0,
-            )
-        a_mid = forcing[2 * j + 1]
-        for m in range(n):
-            work[_X2, m] = work[_X, m] + 0.5 * h * work[_V, m]
-            work[_V2, m] = work[_V, m] + 0.5 * h * work[_ACC0, m]
-        _accelerations(
-            modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X2, _V2, xa, fa, a_mid, _ACC2
-        )
-        for m in range(n):
-            work[_X3, m] = work[_X, m] + 0.5 * h * work[_V2, m]
-            work[_V3, m] = work[_V, m] + 0.5 * h * work[_ACC2, m]
-        _accelerations(
-            modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X3, _V3, xa, fa, a_mid, _ACC3
-        )
-        for m in range(n):
-            work[_X4, m] = work[_X, m] + h * work[_V3, m]
-            work[_V4, m] = work[_V, m] + h * work[_ACC3, m]
-        _accelerations(
-            modal,
-            shapes,
-            el_int,
-            el_float,
-            cp_int,
-            cp_coef,
-            work,
-            _X4,
-            _V4,
-            xa,
-            fa,
-            forcing[2 * j + 2],
-            _ACC4,
-        )
+            _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V, xa, fa,
+                           forcing[2 * j], _ACC0)  # fmt: skip
+        # Stages 2, 3, 4: rows (x, v, a) = _X2 + 3i, …; each from the previous
+        # stage's velocity and acceleration, a half, a half and a whole step on.
+        for i in range(3):
+            x_row, v_row, a_row = _X2 + 3 * i, _V2 + 3 * i, _ACC2 + 3 * i
+            v_previous = _V if i == 0 else v_row - 3
+            fraction = 1.0 if i == 2 else 0.5
+            for m in range(n):
+                work[x_row, m] = work[_X, m] + fraction * h * work[v_previous, m]
+                work[v_row, m] = work[_V, m] + fraction * h * work[a_row - 3, m]
+            _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, x_row, v_row,
+                           xa, fa, forcing[2 * j + 1 + i // 2], a_row)  # fmt: skip
         for m in range(n):
             work[_X, m] = work[_X, m] + h / 6.0 * (
                 work[_V, m] + 2.0 * work[_V2, m] + 2.0 * work[_V3, m] + work[_V4, m]
