@@ -334,7 +334,8 @@ def _setup(
     if lock_sensor is None:
         lock = np.eye(n)[target]
     else:
-        if not isinstance(lock_sensor, int | np.integer) or not 0 <= lock_sensor < len(shapes):
+        integer = isinstance(lock_sensor, int | np.integer) and not isinstance(lock_sensor, bool)
+        if not integer or not 0 <= lock_sensor < len(shapes):
             raise ValueError(
                 f"lock_sensor must be a sensor index in 0..{len(shapes) - 1}, got {lock_sensor!r}"
             )
