@@ -1,0 +1,510 @@
+"""The PLL of a virtual phase-resonance test on a model of N modes, with multi-point sensors.
+
+:func:`simulate_modal_pll` runs the one-mode PLL's loop
+(:mod:`identification.analytical.pll.closed_loop`, whose conventions for phases,
+detector, controller, level schedule and lock detection hold unchanged, and whose
+:class:`~identification.analytical.pll.config.PLLConfig` sets the test) on a
+:class:`~identification.multimode.model.ModalModel`; :func:`modal_pll_backbones`
+runs it on many parameter sets on numba threads. The numba core is
+:mod:`identification.multimode.pll.kernel`.
+
+Conventions beyond the one-mode loop
+------------------------------------
+Excitation
+    ``u(t) = A sin θ`` is the base acceleration (modal force ``−Γ_m u``), or, with
+    ``drive`` given, a force (per unit modal mass) at a driving point whose shapes
+    are ``drive`` (modal force ``drive_m u``).
+Lock
+    The loop locks the phase of the target mode's coordinate ``η_t`` (what a modal
+    filter of the sensors gives; default) or of one sensor's response
+    ``y_s = Σ_m φ_sm η_m`` (``lock_sensor``), at phase resonance of the target mode:
+    ``η_t`` lags its modal force by 90°. A sensor lock also sees the other modes'
+    fundamentals, so it holds a point slightly off the target mode's phase resonance.
+Backbone point
+    Over the measured periods: the target mode's fundamental amplitude ``|Q_t|``
+    (m), the mean frequency, the damping ratio from the power balance of the target
+    mode ``|w_t| |U| / (2 ω² |Q_t|)`` (``U`` the fundamental of ``u``; with one mode
+    and ``Γ = 1`` the one-mode PLL's ``|Q_b| / (2|Q|)``), and every mode's Fourier
+    coefficients ``[C0, C1, S1, C2, S2, C3, S3]`` in ``θ`` — the layout of
+    :attr:`identification.multimode.solve.ModalSolution.coefficients`, whose
+    phase-resonant backbone also has the target's fundamental at ``a cos θ``.
+Sensors
+    ``sensors`` is the mode-shape matrix at the sensors (sensors × modes); the
+    recorded responses are ``y_s = Σ_m φ_sm η_m`` in the configured sensing
+    (relative displacement, velocity or acceleration).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from identification.analytical.harmonic import CoefficientTable
+from identification.analytical.pll.closed_loop import (
+    _AMPLITUDE,
+    _DAMPING,
+    _DIVERGED,
+    _FREQUENCY,
+    _HARMONICS,
+    _KI,
+    _KP,
+    _LOCKED,
+    _MAX_HOLD,
+    _MEASURE_START,
+    _MU,
+    _N_CONTROL,
+    _N_RESULTS,
+    _N_SAMPLES,
+    _N_SUB,
+    _OMEGA_HIGH,
+    _OMEGA_INITIAL,
+    _OMEGA_LOW,
+    _PHASE_ERROR,
+    _RAMP,
+    _REFERENCE,
+    _SENSING,
+    _TARGET,
+    _check_timing,
+    _settings,
+)
+from identification.analytical.pll.config import PLLConfig, _pole_placement
+from identification.analytical.pll.integrator import _RK4_STABLE_STEP, _linear_coefficients
+from identification.checks import positive_vector
+from identification.multimode.balance import ModalArrays, modal_arrays
+from identification.multimode.model import ModalModel
+from identification.multimode.pll import kernel
+from identification.multimode.pll.kernel import _N_COEFFICIENTS, CHANNELS, PARTICIPATION_HARMONICS
+
+__all__ = [
+    "ModalPLLResult",
+    "ModalPLLTimeSeries",
+    "modal_pll_backbones",
+    "simulate_modal_pll",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class ModalPLLTimeSeries:
+    """Samples of a virtual phase-resonance test of N modes (``fs`` Hz, SI units).
+
+    As :class:`~identification.analytical.pll.closed_loop.PLLTimeSeries`, with the
+    modal state in place of the one relative coordinate: ``eta``, ``eta_dot``,
+    ``eta_ddot`` are ``(N, n_samples)``; ``sensors`` is ``(n_sensors, n_samples)``,
+    ``y_s = Σ_m φ_sm η_m`` in the configured sensing. ``base_acceleration`` is the
+    excitation ``u`` (a force per unit modal mass when the test drives a point).
+    """
+
+    fs: float
+    t: np.ndarray
+    eta: np.ndarray
+    eta_dot: np.ndarray
+    eta_ddot: np.ndarray
+    sensors: np.ndarray
+    base_acceleration: np.ndarray
+    base_velocity: np.ndarray
+    frequency_hz: np.ndarray
+    phase: np.ndarray
+    response_phase_deg: np.ndarray
+    level: np.ndarray
+    level_index: np.ndarray
+    holds: np.ndarray
+    measurements: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class ModalPLLResult:
+    """Backbone points of the target mode and every mode's participation, per hold.
+
+    Arrays have shape ``(n_levels,)`` for one model, ``(n_sets, n_levels)`` for a
+    batch (then ``(…, N, 7)`` for ``coefficients``); unlocked levels are NaN.
+
+    Attributes
+    ----------
+    mode
+        The target mode (from 1).
+    level
+        Excitation amplitude of each level (m/s², or N/kg at a driving point).
+    amplitude_m
+        Fundamental amplitude of the target mode's coordinate ``|Q_t|`` (m).
+    frequency_hz
+        Mean oscillator frequency over the measured periods (Hz).
+    damping_ratio
+        Power balance of the target mode, ``|w_t| |U| / (2 ω² |Q_t|)``.
+    phase_error_deg
+        Phase of the locked signal's fundamental minus its resonant target (deg).
+    locked
+        Whether the level locked and was measured.
+    coefficients
+        ``(…, N, 7)`` Fourier coefficients ``[C0, C1, S1, C2, S2, C3, S3]`` of every
+        modal coordinate in the oscillator phase ``θ`` (m).
+    time_series
+        The samples (single runs with ``record=True``), else None.
+    """
+
+    mode: int
+    level: np.ndarray
+    amplitude_m: np.ndarray
+    frequency_hz: np.ndarray
+    damping_ratio: np.ndarray
+    phase_error_deg: np.ndarray
+    locked: np.ndarray
+    coefficients: np.ndarray
+    time_series: ModalPLLTimeSeries | None = field(default=None, repr=False)
+
+    @property
+    def participation_amplitude_m(self) -> np.ndarray:
+        """``(…, N, 3)``: amplitude ``√(C_k² + S_k²)`` of every mode at harmonics k = 1–3 (m)."""
+        return np.hypot(self.coefficients[..., 1::2], self.coefficients[..., 2::2])
+
+    @property
+    def participation_phase_deg(self) -> np.ndarray:
+        """``(…, N, 3)``: phase of every mode's harmonic k against k × the target's fundamental.
+
+        Harmonic k of mode m is ``|P| cos(kθ + φ)``; reported is ``φ − k φ_t1``
+        (deg, wrapped to (−180, 180]), independent of the origin of ``θ``.
+        """
+        phase = np.arctan2(-self.coefficients[..., 2::2], self.coefficients[..., 1::2])
+        target = phase[..., self.mode - 1, None, :1]
+        orders = np.arange(1, PARTICIPATION_HARMONICS + 1)
+        relative = phase - orders * target
+        return np.degrees(np.angle(np.exp(1j * relative)))
+
+
+# --------------------------------------------------------------------------
+# Arrays for the kernel.
+
+
+@dataclass(frozen=True)
+class _KernelArrays:
+    """A model's arrays as the kernel takes them, leading axis the parameter set."""
+
+    modal: np.ndarray  # (B, N, 3): ω², 2ζω, w
+    shapes: np.ndarray  # (B, J, N)
+    el_int: np.ndarray  # (E, 3): catalogue index, joint, hysteretic
+    el_float: np.ndarray  # (B, E, 3): coefficient, p0, p1
+    cp_int: np.ndarray  # (C, 1 + N): equation, powers
+    cp_coef: np.ndarray  # (B, C)
+
+
+def _kernel_arrays(arrays: ModalArrays, drive: np.ndarray | None) -> _KernelArrays:
+    n_sets, n_modes = arrays.n_sets, arrays.n_modes
+    modal = np.empty((n_sets, n_modes, 3))
+    modal[..., 0] = arrays.omega**2
+    modal[..., 1] = 2.0 * arrays.zeta * arrays.omega
+    modal[..., 2] = -arrays.participation if drive is None else drive
+    n_elements = len(arrays.effects)
+    el_int = np.zeros((n_elements, 3), dtype=np.int64)
+    el_float = np.zeros((n_sets, n_elements, 3))
+    for e, effect in enumerate(arrays.effects):
+        el_int[e] = effect.index, arrays.element_joints[e], int(effect.hysteretic)
+        el_float[:, e, 0] = arrays.element_coefficients[:, e]
+        el_float[:, e, 1:] = effect.shape_values(**arrays.element_shapes[e])
+    cp_int = np.concatenate([arrays.coupling_modes[:, None], arrays.coupling_powers], axis=1)
+    return _KernelArrays(
+        modal=modal,
+        shapes=np.ascontiguousarray(arrays.joint_shapes),
+        el_int=el_int,
+        el_float=el_float,
+        cp_int=np.ascontiguousarray(cp_int, dtype=np.int64),
+        cp_coef=np.ascontiguousarray(arrays.coupling_coefficients),
+    )
+
+
+def _linearisation(arrays: ModalArrays, k: _KernelArrays):
+    """Per-set stiffness matrix, damping matrix, friction-slope matrix and Jenkins bound at rest.
+
+    Each element's small-amplitude stiffness, viscous damping and damping slope are
+    the one-mode integrator's (:func:`~identification.analytical.pll.integrator.
+    _linear_coefficients` of that element alone), spread over the modes by
+    ``φ_j φ_jᵀ``.
+    """
+    stiffness = np.zeros((arrays.n_sets, arrays.n_modes, arrays.n_modes))
+    idx = np.arange(arrays.n_modes)
+    stiffness[:, idx, idx] = k.modal[..., 0]
+    damping = np.zeros_like(stiffness)
+    damping[:, idx, idx] = k.modal[..., 1]
+    slope = np.abs(damping)
+    jenkins = np.zeros(arrays.n_sets)
+    for e, effect in enumerate(arrays.effects):
+        phi = arrays.joint_shapes[:, arrays.element_joints[e], :]
+        outer = phi[:, :, None] * phi[:, None, :]
+        c = k.el_float[:, e, 0]
+        if effect.hysteretic:
+            table = CoefficientTable(
+                np.zeros(0, dtype=np.int64), np.zeros((arrays.n_sets, 0)),
+                np.zeros((arrays.n_sets, 0, 2)), k.el_float[:, e], True,
+            )  # fmt: skip
+            jenkins += np.abs(c * k.el_float[:, e, 1]) * np.sum(phi**2, axis=1)
+        else:
+            table = CoefficientTable(
+                np.array([effect.index]), c[:, None], k.el_float[:, e, None, 1:],
+                np.zeros((arrays.n_sets, 3)), False,
+            )  # fmt: skip
+        k_e, d_e, s_e = _linear_coefficients(table)
+        stiffness += k_e[:, None, None] * outer
+        damping += d_e[:, None, None] * outer
+        slope += s_e[:, None, None] * outer
+    return stiffness, damping, slope, jenkins
+
+
+def _control(
+    arrays: ModalArrays, k: _KernelArrays, config: PLLConfig, target: int, what: str
+) -> np.ndarray:
+    """Per-set gains, frequency range and sub-steps, ``(n_sets, _N_CONTROL)``.
+
+    As the one-mode loop's: gains designed at the target mode's small-amplitude
+    frequency and viscous damping (joint elements' linear parts included).
+    """
+    stiffness, damping, slope, jenkins = _linearisation(arrays, k)
+    k_t = stiffness[:, target, target]
+    with np.errstate(invalid="ignore"):
+        omega_linear = np.where(k_t > 0, np.sqrt(np.abs(k_t)), np.nan)
+    if config.initial_frequency_hz is not None:
+        omega_initial = np.full(arrays.n_sets, 2.0 * np.pi * config.initial_frequency_hz)
+    else:
+        omega_initial = omega_linear
+    control = np.zeros((arrays.n_sets, _N_CONTROL))
+    if config.gains is None:
+        omega_design = np.where(np.isfinite(omega_linear), omega_linear, omega_initial)
+        kp, ki, bandwidth = _pole_placement(
+            omega_design, 0.5 * damping[:, target, target] / omega_design, config.bandwidth_ratio
+        )
+    else:
+        kp, ki, bandwidth = config.gains.kp, config.gains.ki, config.gains.detector_bandwidth
+    control[:, _KP] = kp
+    control[:, _KI] = ki
+    control[:, _MU] = 2.0 * np.asarray(bandwidth)
+    control[:, _OMEGA_INITIAL] = omega_initial
+    control[:, _OMEGA_LOW] = config.frequency_limits[0] * omega_initial
+    control[:, _OMEGA_HIGH] = config.frequency_limits[1] * omega_initial
+    # |λ|² ≤ ‖C‖|λ| + ‖K‖ for the linearisation λ²x + λCx + Kx = 0 (the one-mode bound
+    # with matrix norms; the Jenkins spring counted once more, as there).
+    norm_k = np.max(np.abs(np.linalg.eigvalsh(stiffness)), axis=1) + jenkins
+    norm_c = np.max(np.abs(np.linalg.eigvalsh(slope)), axis=1)
+    largest = 0.5 * norm_c + np.sqrt(0.25 * norm_c**2 + norm_k)
+    n_sub = np.maximum(1, np.ceil(largest / config.fs / _RK4_STABLE_STEP)).astype(np.int64)
+    worst = int(np.argmax(n_sub))
+    if n_sub[worst] > config.max_substeps:
+        raise ValueError(
+            ("" if arrays.n_sets == 1 else f"parameter set {worst}: ")
+            + f"model {what!r} needs {n_sub[worst]} RK4 sub-steps per sample (more than "
+            f"max_substeps = {config.max_substeps}) to stay stable: a friction coefficient "
+            "over its v_reg or a Jenkins stiffness is too stiff; raise v_reg or fs"
+        )
+    control[:, _N_SUB] = n_sub
+    if config.gains is None:
+        control[~np.isfinite(control[:, _KP]), _OMEGA_INITIAL] = np.nan
+    return control
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """Everything a run needs besides the levels."""
+
+    arrays: _KernelArrays
+    lock: np.ndarray
+    target: int
+    control: np.ndarray
+    settings: np.ndarray
+    sensors: np.ndarray
+
+
+def _setup(
+    model: ModalModel,
+    mode: int,
+    sensors: ArrayLike | None,
+    lock_sensor: int | None,
+    drive: ArrayLike | None,
+    config: PLLConfig,
+    parameters: ArrayLike | None = None,
+    names: Sequence[str] | None = None,
+) -> _Setup:
+    n = model.n_modes
+    if isinstance(mode, bool) or not isinstance(mode, int | np.integer) or not 1 <= mode <= n:
+        raise ValueError(f"mode must be an integer in 1..{n} (modes count from 1), got {mode!r}")
+    target = int(mode) - 1
+    shapes = np.eye(n) if sensors is None else np.asarray(sensors, dtype=float)
+    if shapes.ndim != 2 or shapes.shape[1] != n or not np.all(np.isfinite(shapes)):
+        raise ValueError(
+            f"sensors must be a finite (n_sensors, {n}) mode-shape matrix, got shape {shapes.shape}"
+        )
+    if lock_sensor is None:
+        lock = np.eye(n)[target]
+    else:
+        integer = isinstance(lock_sensor, int | np.integer) and not isinstance(lock_sensor, bool)
+        if not integer or not 0 <= lock_sensor < len(shapes):
+            raise ValueError(
+                f"lock_sensor must be a sensor index in 0..{len(shapes) - 1}, got {lock_sensor!r}"
+            )
+        lock = shapes[lock_sensor].copy()
+        if lock[target] == 0.0:
+            raise ValueError(f"sensor {lock_sensor} does not see mode {mode} (its shape is 0)")
+    if drive is not None:
+        drive = np.asarray(drive, dtype=float)
+        if drive.shape != (n,) or not np.all(np.isfinite(drive)):
+            raise ValueError(f"drive must be the {n} finite shapes of the driving point")
+    arrays = modal_arrays(model, parameters, names)
+    k = _kernel_arrays(arrays, drive)
+    weight = k.modal[:, target, 2]
+    if np.any(weight == 0.0):
+        raise ValueError(f"mode {mode} is not excited (its modal excitation weight is 0)")
+    if len(set(np.sign(weight))) > 1:
+        raise ValueError(f"the sign of mode {mode}'s excitation weight differs between sets")
+    control = _control(arrays, k, config, target, model.name or f"{n}-mode model")
+    _check_timing(config, control)
+    settings = _settings(config)
+    # The one-mode settings assume the modal force −u (base excitation, Γ = 1): where
+    # the locked signal's target weight times the excitation weight is positive, the
+    # force is in phase with u, 180° from that assumption.
+    if lock[target] * weight[0] > 0:
+        settings[_TARGET] -= np.pi
+        settings[_REFERENCE] -= np.pi
+    return _Setup(k, lock, target, control, settings, shapes)
+
+
+def _result(mode: int, excitation: np.ndarray, out: np.ndarray, n_modes: int, series=None):
+    coefficients = out[..., _N_RESULTS:].reshape(*out.shape[:-1], n_modes, _N_COEFFICIENTS)
+    return ModalPLLResult(
+        mode=mode,
+        level=excitation,
+        amplitude_m=out[..., _AMPLITUDE].copy(),
+        frequency_hz=out[..., _FREQUENCY].copy(),
+        damping_ratio=out[..., _DAMPING].copy(),
+        phase_error_deg=out[..., _PHASE_ERROR].copy(),
+        locked=out[..., _LOCKED] > 0.0,
+        coefficients=coefficients.copy(),
+        time_series=series,
+    )
+
+
+def simulate_modal_pll(
+    model: ModalModel,
+    excitation_m_s2: ArrayLike,
+    *,
+    mode: int = 1,
+    sensors: ArrayLike | None = None,
+    lock_sensor: int | None = None,
+    drive: ArrayLike | None = None,
+    config: PLLConfig | None = None,
+    record: bool = False,
+) -> ModalPLLResult:
+    """Virtual phase-resonance test of ``mode`` of an N-mode model at stepped levels.
+
+    Parameters
+    ----------
+    model
+        The model (mass-normalised modal coordinates).
+    excitation_m_s2
+        Excitation amplitudes of the holds (base acceleration in m/s², or force
+        per unit modal mass at the driving point), in test order, each > 0.
+    mode
+        The mode whose phase resonance the loop holds (from 1).
+    sensors
+        ``(n_sensors, N)`` mode shapes at the sensors; default the modal
+        coordinates themselves (identity).
+    lock_sensor
+        Lock on this sensor's response (row of ``sensors``, from 0); default on
+        the target mode's coordinate.
+    drive
+        ``(N,)`` shapes at a driving point: force excitation there instead of the base.
+    config
+        Test settings; default :class:`PLLConfig()`.
+    record
+        Keep the samples (:class:`ModalPLLTimeSeries`).
+    """
+    config = PLLConfig() if config is None else config
+    excitation = positive_vector(excitation_m_s2, "excitation_m_s2")
+    setup = _setup(model, mode, sensors, lock_sensor, drive, config)
+    a = setup.arrays
+    args = (a.modal[0], a.shapes[0], a.el_int, a.el_float[0], a.cp_int, a.cp_coef[0], setup.lock,
+            setup.target, setup.control[0], setup.settings)  # fmt: skip
+    n = model.n_modes
+    out = np.empty((excitation.size, _N_RESULTS + n * _N_COEFFICIENTS))
+    if not record:
+        kernel.backbone(*args, excitation, out)
+        return _result(mode, excitation, out, n)
+    return _recorded_run(mode, args, setup, excitation, out, config.fs, n)
+
+
+def _recorded_run(mode, args, setup, excitation, out, fs, n_modes) -> ModalPLLResult:
+    """Level by level through the same kernel as :func:`kernel.backbone`, keeping the samples."""
+    out[:] = np.nan
+    out[:, _LOCKED] = 0.0
+    settings = setup.settings
+    n_levels = excitation.size
+    holds = np.full((n_levels, 2), -1, dtype=np.int64)
+    measurements = np.full((n_levels, 2), -1, dtype=np.int64)
+    n_rows = len(CHANNELS) + 3 * n_modes
+    pieces, indices = [], []
+    ramp, max_hold = int(settings[_RAMP]), int(settings[_MAX_HOLD])
+    control = setup.control[0]
+    if control[_OMEGA_INITIAL] > 0.0:
+        state = kernel.initial_state(control[_OMEGA_INITIAL], int(settings[_HARMONICS]), n_modes,
+                                     setup.arrays.el_int.shape[0])  # fmt: skip
+        buffer = np.empty((n_rows, ramp + max_hold + 1))
+        start, a_from = 0, 0.0
+        for j, a_to in enumerate(excitation):
+            kernel.run_level(*args, state, a_from, a_to, buffer, out[j])
+            n = int(out[j, _N_SAMPLES])
+            pieces.append(buffer[:, :n].copy())
+            indices.append(np.full(n, j, dtype=np.int64))
+            if n > ramp:
+                holds[j] = start + ramp, start + n
+            if out[j, _LOCKED] > 0:
+                measurements[j] = start + int(out[j, _MEASURE_START]), start + n
+            start += n
+            if out[j, _DIVERGED] > 0:
+                break
+            a_from = a_to
+    samples = np.concatenate(pieces, axis=1) if pieces else np.empty((n_rows, 0))
+    head = len(CHANNELS)
+    eta, eta_dot, eta_ddot = (samples[head + i * n_modes : head + (i + 1) * n_modes]
+                              for i in range(3))  # fmt: skip
+    sensed = (eta, eta_dot, eta_ddot)[int(settings[_SENSING])]
+    series = ModalPLLTimeSeries(
+        fs=fs,
+        t=np.arange(samples.shape[1]) / fs,
+        eta=eta,
+        eta_dot=eta_dot,
+        eta_ddot=eta_ddot,
+        sensors=setup.sensors @ sensed,
+        level_index=np.concatenate(indices) if indices else np.empty(0, dtype=np.int64),
+        holds=holds,
+        measurements=measurements,
+        **dict(zip(CHANNELS, samples[:head], strict=True)),
+    )
+    return _result(mode, excitation, out, n_modes, series)
+
+
+def modal_pll_backbones(
+    model: ModalModel,
+    excitation_m_s2: ArrayLike,
+    parameters: ArrayLike,
+    names: Sequence[str],
+    *,
+    mode: int = 1,
+    sensors: ArrayLike | None = None,
+    lock_sensor: int | None = None,
+    drive: ArrayLike | None = None,
+    config: PLLConfig | None = None,
+) -> ModalPLLResult:
+    """:func:`simulate_modal_pll` on many parameter sets of one model, on numba threads.
+
+    ``parameters`` is ``(n_sets, len(names))`` with names from
+    :attr:`ModalModel.parameter_names`; the other arguments are those of
+    :func:`simulate_modal_pll`. Arrays of the result are ``(n_sets, n_levels)``, the
+    same numbers as :func:`simulate_modal_pll` on each set.
+    """
+    config = PLLConfig() if config is None else config
+    excitation = positive_vector(excitation_m_s2, "excitation_m_s2")
+    setup = _setup(model, mode, sensors, lock_sensor, drive, config, parameters, names)
+    a = setup.arrays
+    n_sets, n = a.modal.shape[0], model.n_modes
+    out = np.empty((n_sets, excitation.size, _N_RESULTS + n * _N_COEFFICIENTS))
+    kernel.backbones_parallel(a.modal, a.shapes, a.el_int, a.el_float, a.cp_int, a.cp_coef,
+                              setup.lock, setup.target, setup.control, setup.settings,
+                              excitation, out)  # fmt: skip
+    return _result(mode, excitation, out, n)

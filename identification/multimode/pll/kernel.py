@@ -1,0 +1,423 @@
+"""numba core of the N-mode PLL: the modal equations, their RK4 step and one level's hold.
+
+The loop is the one-mode PLL's (:mod:`identification.analytical.pll.closed_loop`:
+same settings and control vectors, the same phase detector, controller, level
+schedule and lock detector) with the scalar state ``(x, ẋ)`` replaced by the modal
+state ``(η, η̇)`` of a :class:`~identification.multimode.model.ModalModel`::
+
+    η̈_m = w_m u(t) − 2ζ_m ω_m η̇_m − ω_m² η_m − Σ_e φ_{j(e) m} g_e(q_j, q̇_j) − couplings_m
+
+with ``u = A sin θ`` the excitation (base acceleration, or force at a driving
+point) and ``w_m`` its modal weight (``−Γ_m`` for the base, the driving point's
+shape for a force). Catalogue elements are evaluated by
+:func:`identification.effects.memoryless_force` and, for the hysteretic one, by
+:func:`identification.effects.jenkins_force` with one anchor per element, moved to
+the accepted state after each sub-step as in the one-mode integrator.
+
+The detector sees the locked signal ``Σ_m c_m η_m^{(s)}`` (``c`` the unit vector of
+the target mode for a modal lock, a sensor's shapes for a sensor lock; ``s`` the
+derivative order of the sensing). During the measurement the Fourier
+coefficients ``[C0, C1, S1, …, C3, S3]`` of every modal coordinate are
+accumulated over exactly ``n_periods`` oscillator periods.
+
+Arrays of one parameter set (``N`` modes, ``J`` joints, ``E`` elements, ``C`` couplings):
+
+``modal`` (N, 3)
+    ``ω_m², 2ζ_m ω_m, w_m``.
+``shapes`` (J, N)
+    Joint shapes ``φ_jm``.
+``el_int`` (E, 3), ``el_float`` (E, 3)
+    Per element ``[catalogue index, joint, hysteretic]`` and ``[coefficient, p0, p1]``.
+``cp_int`` (C, 1 + N), ``cp_coef`` (C,)
+    Per coupling ``[equation, powers…]`` and its coefficient.
+
+The kernels are inlined into the loop, whose numba cache checks only its own
+file: after editing them, ``make clean-cache``.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from identification.analytical.pll.closed_loop import (
+    _AMPLITUDE,
+    _DAMPING,
+    _DIVERGED,
+    _DT,
+    _FREQUENCY,
+    _HARMONICS,
+    _KI,
+    _KP,
+    _LOCK_PERIODS,
+    _LOCKED,
+    _MAX_HOLD,
+    _MEASURE_START,
+    _MU,
+    _N_PERIODS,
+    _N_RESULTS,
+    _N_SAMPLES,
+    _N_SUB,
+    _OMEGA_HIGH,
+    _OMEGA_INITIAL,
+    _OMEGA_LOW,
+    _PHASE_ERROR,
+    _RAMP,
+    _REFERENCE,
+    _SENSING,
+    _SETTLING_TOLERANCE,
+    _TARGET,
+    _TOLERANCE,
+    _X_MAX,
+    _ramp,
+    _wrap,
+)
+from identification.effects import jenkins_force, memoryless_force
+
+#: Harmonics of every mode measured per hold (``[C0, C1, S1, …, C3, S3]``).
+PARTICIPATION_HARMONICS = 3
+#: Fourier coefficients per mode in a result row.
+_N_COEFFICIENTS = 2 * PARTICIPATION_HARMONICS + 1
+#: Columns of ``modal``.
+_STIFFNESS, _DAMPER, _WEIGHT = range(3)
+#: Rows of the work array: the state η, η̇, η̈, then the RK4 stages.
+(
+    _X, _V, _ACC, _ACC0, _X2, _V2, _ACC2, _X3, _V3, _ACC3, _X4, _V4, _ACC4, _N_WORK,
+) = range(14)  # fmt: skip
+#: Recorded channels besides the modal ones (then η, η̇, η̈ of every mode).
+CHANNELS = (
+    "base_acceleration", "base_velocity", "frequency_hz", "phase", "response_phase_deg", "level",
+)  # fmt: skip
+# Layout of the per-run state vector: the oscillator and controller, the detector's
+# 1 + 2·harmonics coefficients, then η, η̇ and the anchors (x, f) of every element.
+_THETA, _OMEGA, _INTEGRAL, _CONTROL_ON, _DETECTOR = range(5)
+
+
+@numba.njit(cache=True, inline="always")
+def _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, x, v, xa, fa, u, out):
+    """``work[out, m] = η̈_m`` at ``η = work[x]``, ``η̇ = work[v]`` under excitation ``u``.
+
+    Rows of one 2-D work array rather than separate arrays: slicing rows in the
+    hot loop would cost atomic reference counts at every stage of every step.
+    Hysteretic elements are evaluated from their anchors.
+    """
+    n = work.shape[1]
+    for m in range(n):
+        work[out, m] = (
+            modal[m, _WEIGHT] * u
+            - modal[m, _DAMPER] * work[v, m]
+            - modal[m, _STIFFNESS] * work[x, m]
+        )
+    for e in range(el_int.shape[0]):
+        j = el_int[e, 1]
+        q = 0.0
+        q_dot = 0.0
+        for m in range(n):
+            q += shapes[j, m] * work[x, m]
+            q_dot += shapes[j, m] * work[v, m]
+        if el_int[e, 2]:
+            g = el_float[e, 0] * jenkins_force(q, xa[e], fa[e], el_float[e, 1], el_float[e, 2])
+        else:
+            g = el_float[e, 0] * memoryless_force(el_int[e, 0], q, q_dot, el_float[e, 1],
+                                                  el_float[e, 2])  # fmt: skip
+        for m in range(n):
+            work[out, m] -= shapes[j, m] * g
+    for i in range(cp_int.shape[0]):
+        term = cp_coef[i]
+        for k in range(n):
+            for _ in range(cp_int[i, 1 + k]):
+                term *= work[x, k]
+        work[out, cp_int[i, 0]] -= term
+
+
+@numba.njit(cache=True, inline="always")
+def _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing):
+    """RK4 over ``len(forcing) // 2`` sub-steps of ``h``, in place on ``work[_X], work[_V]``.
+
+    ``work[_ACC]`` holds the accelerations at the start, ``forcing[j]`` the
+    excitation at ``j·h/2``; the other rows of ``work`` are the stages. The anchors
+    ``xa, fa`` move to the accepted state after each sub-step.
+    """
+    n = work.shape[1]
+    for m in range(n):
+        work[_ACC0, m] = work[_ACC, m]
+    for j in range(forcing.size // 2):
+        if j > 0:
+            _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V, xa, fa,
+                           forcing[2 * j], _ACC0)  # fmt: skip
+        # Stages 2, 3, 4: rows (x, v, a) = _X2 + 3i, …; each from the previous
+        # stage's velocity and acceleration, a half, a half and a whole step on.
+        for i in range(3):
+            x_row, v_row, a_row = _X2 + 3 * i, _V2 + 3 * i, _ACC2 + 3 * i
+            v_previous = _V if i == 0 else v_row - 3
+            fraction = 1.0 if i == 2 else 0.5
+            for m in range(n):
+                work[x_row, m] = work[_X, m] + fraction * h * work[v_previous, m]
+                work[v_row, m] = work[_V, m] + fraction * h * work[a_row - 3, m]
+            _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, x_row, v_row,
+                           xa, fa, forcing[2 * j + 1 + i // 2], a_row)  # fmt: skip
+        for m in range(n):
+            work[_X, m] = work[_X, m] + h / 6.0 * (
+                work[_V, m] + 2.0 * work[_V2, m] + 2.0 * work[_V3, m] + work[_V4, m]
+            )
+            work[_V, m] = work[_V, m] + h / 6.0 * (
+                work[_ACC0, m] + 2.0 * work[_ACC2, m] + 2.0 * work[_ACC3, m] + work[_ACC4, m]
+            )
+        for e in range(el_int.shape[0]):
+            if el_int[e, 2]:
+                q = 0.0
+                for m in range(n):
+                    q += shapes[el_int[e, 1], m] * work[_X, m]
+                fa[e] = jenkins_force(q, xa[e], fa[e], el_float[e, 1], el_float[e, 2])
+                xa[e] = q
+
+
+@numba.njit(cache=True, inline="always")
+def _detect(detector, y, s, c, harmonics, mu_dt):
+    """One LMS step of the one-mode loop's adaptive Fourier detector; the fundamental's phase.
+
+    ``detector`` holds ``c₀, a₁, b₁, …``; ``s, c`` are ``sin θ, cos θ``; the fit is
+    ``y₁ = |Y| sin(θ + phase)``.
+    """
+    fit = detector[0] + detector[1] * s + detector[2] * c
+    sk, ck = s, c
+    for i in range(3, 2 * harmonics + 1, 2):
+        sk, ck = sk * c + ck * s, ck * c - sk * s
+        fit += detector[i] * sk + detector[i + 1] * ck
+    residual = mu_dt * (y - fit)
+    detector[0] += 0.5 * residual  # the mean's gain halved: same time constant 2/μ
+    detector[1] += residual * s
+    detector[2] += residual * c
+    sk, ck = s, c
+    for i in range(3, 2 * harmonics + 1, 2):
+        sk, ck = sk * c + ck * s, ck * c - sk * s
+        detector[i] += residual * sk
+        detector[i + 1] += residual * ck
+    return np.arctan2(detector[2], detector[1])
+
+
+@numba.njit(cache=True, inline="always")
+def _excitation_samples(forcing, u, a_from, a_to, k, ramp, theta, step):
+    """The excitation at the RK4 half sub-steps of sample ``k`` (phase advancing by ``step``)."""
+    n_half = forcing.size - 1
+    forcing[0] = u
+    for j in range(1, n_half + 1):
+        fraction = j / n_half
+        forcing[j] = _ramp(a_from, a_to, k + fraction, ramp) * np.sin(theta + step * fraction)
+
+
+@numba.njit(cache=True)
+def initial_state(omega, harmonics, n_modes, n_elements):
+    """State vector at rest: oscillator at ``omega``, detector, ``η, η̇`` and anchors zero."""
+    state = np.zeros(_DETECTOR + 1 + 2 * harmonics + 2 * n_modes + 2 * n_elements)
+    state[_OMEGA] = omega
+    state[_INTEGRAL] = omega
+    return state
+
+
+@numba.njit(cache=True)
+def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mode, control,
+              settings, state, a_from, a_to, record, result):  # fmt: skip
+    """Ramp to level ``a_to`` and hold it until measured or given up; advances ``state``.
+
+    ``lock`` (N,) weighs the modal coordinates into the locked signal, whose
+    dominant mode is ``target_mode`` (from 0). Writes the
+    level's outcome into ``result`` (the one-mode row, then ``_N_COEFFICIENTS``
+    Fourier coefficients per mode) and, when ``record`` has columns, its samples
+    (the rows of :data:`CHANNELS`, then ``η``, ``η̇``, ``η̈`` of every mode).
+    """
+    dt = settings[_DT]
+    target = settings[_TARGET]
+    sensing = int(settings[_SENSING])
+    tolerance = settings[_TOLERANCE]
+    lock_periods = int(settings[_LOCK_PERIODS])
+    settling_tolerance = settings[_SETTLING_TOLERANCE]
+    max_hold = int(settings[_MAX_HOLD])
+    ramp = int(settings[_RAMP])
+    n_periods = int(settings[_N_PERIODS])
+    x_max = settings[_X_MAX]
+    harmonics = int(settings[_HARMONICS])
+    kp, ki, mu_dt = control[_KP], control[_KI], control[_MU] * dt
+    omega_low, omega_high = control[_OMEGA_LOW], control[_OMEGA_HIGH]
+    n_sub = int(control[_N_SUB])
+    n = modal.shape[0]
+    n_elements = el_int.shape[0]
+    # The power balance of the target mode is |w_t||U| / (2ω²|Q_t|); during the
+    # hold |Q_t| is read from the detector as |Y| / (|c_t| ω^s).
+    weight = abs(modal[target_mode, _WEIGHT])
+    lock_gain = abs(lock[target_mode])
+    recording = record.shape[1] > 0
+    n_channels = len(CHANNELS)
+
+    theta, omega, integral = state[_THETA], state[_OMEGA], state[_INTEGRAL]
+    control_on = state[_CONTROL_ON] > 0.0
+    detector = state[_DETECTOR : _DETECTOR + 1 + 2 * harmonics]
+    offset = _DETECTOR + 1 + 2 * harmonics
+    xa = state[offset + 2 * n : offset + 2 * n + n_elements]
+    fa = state[offset + 2 * n + n_elements : offset + 2 * n + 2 * n_elements]
+    work = np.empty((_N_WORK, n))
+    for m in range(n):
+        work[_X, m] = state[offset + m]
+        work[_V, m] = state[offset + n + m]
+    forcing = np.empty(2 * n_sub + 1)
+    q_modes = np.zeros((n, PARTICIPATION_HARMONICS + 1), dtype=np.complex128)
+    result[:] = np.nan
+    result[_LOCKED] = 0.0
+    result[_DIVERGED] = 0.0
+    result[_MEASURE_START] = -1.0
+
+    locked_count = 0
+    measuring = False
+    done = False
+    next_boundary = np.inf
+    magnitude_previous = -1.0
+    remaining = 0.0
+    duration = 0.0
+    q_y = q_base = 0j
+    error = np.nan
+    k = 0
+    while True:
+        s, c = np.sin(theta), np.cos(theta)
+        amplitude = _ramp(a_from, a_to, k, ramp)
+        u = amplitude * s
+        _accelerations(
+            modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V, xa, fa, u, _ACC
+        )
+        y = 0.0
+        finite = True
+        for m in range(n):
+            if not (
+                abs(work[_X, m]) <= x_max
+                and np.isfinite(work[_V, m])
+                and np.isfinite(work[_ACC, m])
+            ):
+                finite = False
+            y += lock[m] * work[sensing, m]  # rows _X, _V, _ACC are the sensings' order
+        if not finite:
+            result[_DIVERGED] = 1.0
+            break
+
+        phase = _detect(detector, y, s, c, harmonics, mu_dt)
+        error = _wrap(phase - target)
+
+        if control_on:
+            integral = min(max(integral + ki * error * dt, omega_low), omega_high)
+            omega = min(max(integral + kp * error, omega_low), omega_high)
+
+        if recording:
+            record[0, k] = u
+            record[1, k] = -amplitude * c / omega
+            record[2, k] = omega / (2.0 * np.pi)
+            record[3, k] = theta
+            record[4, k] = np.degrees(_wrap(phase - settings[_REFERENCE]))
+            record[5, k] = amplitude
+            for m in range(n):
+                for row in range(3):
+                    record[n_channels + row * n + m, k] = work[row, m]
+
+        if k == ramp:
+            control_on = True
+            next_boundary = theta + 2.0 * np.pi
+        elif k > ramp and theta >= next_boundary:
+            next_boundary += 2.0 * np.pi
+            magnitude = np.hypot(detector[1], detector[2])
+            # Power balance of the locked mode from the detector: |w_t| |U| / (2ω²|Q_t|).
+            damping = weight * lock_gain * amplitude * omega**sensing / (2.0 * omega**2 * magnitude)
+            change = abs(magnitude - magnitude_previous) / magnitude
+            steady = change <= settling_tolerance * 2.0 * np.pi * damping
+            ok = abs(error) <= tolerance and steady and omega_low < omega < omega_high
+            magnitude_previous = magnitude
+            if measuring and not ok:
+                measuring = False
+                locked_count = 0
+            elif not measuring:
+                locked_count = locked_count + 1 if ok else 0
+                if locked_count >= lock_periods:
+                    measuring = True
+                    remaining = 2.0 * np.pi * n_periods
+                    duration = 0.0
+                    q_y = q_base = 0j
+                    q_modes[:] = 0j
+                    result[_MEASURE_START] = k
+        if measuring:
+            step = omega * dt
+            if step >= remaining:
+                step = remaining
+                done = True
+            remaining -= step
+            duration += step / omega
+            rotation = complex(c, -s) * step
+            q_y += y * rotation
+            q_base += u * rotation
+            turn = rotation
+            for m in range(n):
+                q_modes[m, 0] += work[_X, m] * step
+            for h in range(1, PARTICIPATION_HARMONICS + 1):
+                for m in range(n):
+                    q_modes[m, h] += work[_X, m] * turn
+                turn *= complex(c, -s)
+
+        _excitation_samples(forcing, u, a_from, a_to, k, ramp, theta, omega * dt)
+        _advance(
+            modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, dt / n_sub, forcing
+        )
+        theta = theta + omega * dt
+        k += 1
+        if done or k - ramp >= max_hold:
+            break
+
+    state[_THETA], state[_OMEGA], state[_INTEGRAL] = theta, omega, integral
+    state[_CONTROL_ON] = 1.0 if control_on else 0.0
+    for m in range(n):
+        state[offset + m] = work[_X, m]
+        state[offset + n + m] = work[_V, m]
+    result[_N_SAMPLES] = k
+    if done:
+        frequency = n_periods / duration
+        scale = np.pi * n_periods
+        for m in range(n):
+            row = _N_RESULTS + m * _N_COEFFICIENTS
+            result[row] = q_modes[m, 0].real / (2.0 * scale)
+            for h in range(1, PARTICIPATION_HARMONICS + 1):
+                # Σ η e^{−ihθ} dθ = πn (C_h − i S_h)
+                result[row + 2 * h - 1] = q_modes[m, h].real / scale
+                result[row + 2 * h] = -q_modes[m, h].imag / scale
+        amplitude_t = abs(q_modes[target_mode, 1]) / scale
+        amplitude_u = abs(q_base) / scale / (2.0 * np.pi * frequency) ** 2
+        result[_AMPLITUDE] = amplitude_t
+        result[_FREQUENCY] = frequency
+        result[_DAMPING] = weight * amplitude_u / (2.0 * amplitude_t)
+        phase_difference = np.arctan2(q_y.imag, q_y.real) - np.arctan2(q_base.imag, q_base.real)
+        result[_PHASE_ERROR] = np.degrees(_wrap(phase_difference - target))
+        result[_LOCKED] = 1.0
+    elif result[_DIVERGED] == 0.0:
+        result[_PHASE_ERROR] = np.degrees(error)
+
+
+@numba.njit(cache=True)
+def backbone(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mode, control,
+             settings, excitation, out):  # fmt: skip
+    """All levels of one parameter set; ``out`` is ``(n_levels, row size)``."""
+    out[:] = np.nan
+    out[:, _LOCKED] = 0.0
+    if not (control[_OMEGA_INITIAL] > 0.0):
+        return
+    state = initial_state(control[_OMEGA_INITIAL], int(settings[_HARMONICS]), modal.shape[0],
+                          el_int.shape[0])  # fmt: skip
+    record = np.empty((0, 0))
+    a_from = 0.0
+    for j in range(excitation.size):
+        run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mode, control,
+                  settings, state, a_from, excitation[j], record, out[j])  # fmt: skip
+        if out[j, _DIVERGED] > 0.0:
+            return
+        a_from = excitation[j]
+
+
+@numba.njit(cache=True, parallel=True)
+def backbones_parallel(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mode,
+                       control, settings, excitation, out):  # fmt: skip
+    """:func:`backbone` of every parameter set (leading axis), on numba threads."""
+    for i in numba.prange(modal.shape[0]):
+        backbone(modal[i], shapes[i], el_int, el_float[i], cp_int, cp_coef[i], lock, target_mode,
+                 control[i], settings, excitation, out[i])  # fmt: skip
