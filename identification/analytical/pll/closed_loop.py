@@ -131,6 +131,7 @@ from identification.analytical.pll.loop import (
     _loop_settings,
     _measure_step,
     _ramp,
+    _record_loop,
     _wrap,
 )
 from identification.checks import positive_vector
@@ -290,12 +291,7 @@ def _run_level(
             record[0, n] = x
             record[1, n] = v
             record[2, n] = acc
-            record[3, n] = a_base
-            record[4, n] = -amplitude * c / omega
-            record[5, n] = omega / (2.0 * np.pi)
-            record[6, n] = theta
-            record[7, n] = np.degrees(_wrap(phase - settings[_REFERENCE]))
-            record[8, n] = amplitude
+            _record_loop(record, 3, n, a_base, amplitude, c, theta, omega, phase, settings)
 
         if n == ramp:  # the hold starts; the first level's controller switches on here
             control_on = True

@@ -107,6 +107,22 @@ def _detect(detector, y, s, c, harmonics, mu_dt):
 
 
 @numba.njit(cache=True, inline="always")
+def _record_loop(record, row, k, u, amplitude, c, theta, omega, phase, settings):
+    """The loop's channels of sample ``k``, in rows ``row`` to ``row + 5``.
+
+    The excitation ``u = A sin θ``, its quasi-static integral ``−A cos θ / ω``, the
+    frequency (Hz), θ, the detector's phase against the configured reference
+    (deg) and the commanded level ``A``.
+    """
+    record[row, k] = u
+    record[row + 1, k] = -amplitude * c / omega
+    record[row + 2, k] = omega / (2.0 * np.pi)
+    record[row + 3, k] = theta
+    record[row + 4, k] = np.degrees(_wrap(phase - settings[_REFERENCE]))
+    record[row + 5, k] = amplitude
+
+
+@numba.njit(cache=True, inline="always")
 def _lock_step(settings, control, detector, error, gain, amplitude, omega, magnitude_previous,
                measuring, locked_count):  # fmt: skip
     """The lock detector at a completed oscillator period.

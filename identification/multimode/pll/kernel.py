@@ -48,7 +48,6 @@ from identification.analytical.pll.loop import (
     _MEASURE_START,
     _N_RESULTS,
     _OMEGA_INITIAL,
-    _REFERENCE,
     _clear_result,
     _close_level,
     _detect,
@@ -57,6 +56,7 @@ from identification.analytical.pll.loop import (
     _loop_settings,
     _measure_step,
     _ramp,
+    _record_loop,
     _wrap,
 )
 from identification.effects import jenkins_force, memoryless_force
@@ -246,12 +246,7 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
             omega = min(max(integral + kp * error, omega_low), omega_high)
 
         if recording:
-            record[0, k] = u
-            record[1, k] = -amplitude * c / omega
-            record[2, k] = omega / (2.0 * np.pi)
-            record[3, k] = theta
-            record[4, k] = np.degrees(_wrap(phase - settings[_REFERENCE]))
-            record[5, k] = amplitude
+            _record_loop(record, 0, k, u, amplitude, c, theta, omega, phase, settings)
             for m in range(n):
                 for row in range(3):
                     record[n_channels + row * n + m, k] = work[row, m]
