@@ -25,8 +25,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results"
 SCRIPTS = (
-    "harmonic", "pll", "identify", "surrogate", "scaling", "sampling", "population_coverage",
-    "criticism", "records", "lab_rig",
+    "harmonic", "pll", "multimode_harmonic", "multimode_pll", "identify", "surrogate", "scaling",
+    "sampling", "population_coverage", "criticism", "records", "lab_rig",
 )  # fmt: skip
 
 

@@ -59,7 +59,9 @@ Backbone point
     error of the sensed response against the target.
 
 Time integration is classical RK4 at the sampling step ``1/fs``, in numba
-(:mod:`identification.analytical.pll.integrator`).
+(:mod:`identification.analytical.pll.integrator`); the loop's steps (excitation
+samples, detector, lock detector, measurement) are
+:mod:`identification.analytical.pll.loop`'s, shared with the N-mode PLL.
 
 A run that diverges (non-finite state or ``|x| > max_displacement_m``) marks
 the current and all later levels unlocked, with NaN numbers; so does a model
@@ -89,6 +91,48 @@ from identification.analytical.pll.integrator import (
     _linear_coefficients,
     _substep_message,
     _substeps,
+)
+from identification.analytical.pll.loop import (
+    _AMPLITUDE,
+    _DAMPING,
+    _DIVERGED,
+    _DT,
+    _FREQUENCY,
+    _HARMONICS,
+    _KI,
+    _KP,
+    _LOCK_PERIODS,
+    _LOCKED,
+    _MAX_HOLD,
+    _MEASURE_START,
+    _MU,
+    _N_CONTROL,
+    _N_PERIODS,
+    _N_RESULTS,
+    _N_SAMPLES,
+    _N_SETTINGS,
+    _N_SUB,
+    _OMEGA_HIGH,
+    _OMEGA_INITIAL,
+    _OMEGA_LOW,
+    _PHASE_ERROR,
+    _RAMP,
+    _REFERENCE,
+    _SENSING,
+    _SETTLING_TOLERANCE,
+    _TARGET,
+    _TOLERANCE,
+    _X_MAX,
+    _clear_result,
+    _close_level,
+    _detect,
+    _excitation_samples,
+    _lock_step,
+    _loop_settings,
+    _measure_step,
+    _ramp,
+    _record_loop,
+    _wrap,
 )
 from identification.checks import positive_vector
 from identification.model import JointModel
@@ -168,39 +212,14 @@ class PLLResult:
 # --------------------------------------------------------------------------
 # numba core: one level at a time, state carried from level to level.
 
-# Layout of the per-run state vector.
+# Layout of the per-run state vector (the settings, control and result layouts are
+# :mod:`identification.analytical.pll.loop`'s).
 _X, _V, _XA, _FA, _THETA, _OMEGA, _INTEGRAL, _CONTROL_ON, _DETECTOR = range(9)
-# Layout of the settings vector (shared by all sets of a batch).
-(
-    _DT, _TARGET, _SENSING, _TOLERANCE, _LOCK_PERIODS, _SETTLING_TOLERANCE, _MAX_HOLD, _RAMP,
-    _N_PERIODS, _X_MAX, _HARMONICS, _REFERENCE, _N_SETTINGS,
-) = range(13)  # fmt: skip
-# Layout of the per-set control vector.
-_KP, _KI, _MU, _OMEGA_INITIAL, _OMEGA_LOW, _OMEGA_HIGH, _N_SUB, _N_CONTROL = range(8)
-# Layout of a level's result row.
-(
-    _AMPLITUDE, _FREQUENCY, _DAMPING, _PHASE_ERROR, _LOCKED, _DIVERGED, _N_SAMPLES,
-    _MEASURE_START, _N_RESULTS,
-) = range(9)  # fmt: skip
 # Recorded channels.
 _CHANNELS = (
     "x", "v", "a", "base_acceleration", "base_velocity", "frequency_hz", "phase",
     "response_phase_deg", "level",
 )  # fmt: skip
-
-
-@numba.njit(cache=True)
-def _wrap(angle):
-    """Angle in (−π, π]."""
-    return angle - 2.0 * np.pi * np.ceil((angle - np.pi) / (2.0 * np.pi))
-
-
-@numba.njit(cache=True)
-def _ramp(a_from, a_to, samples, ramp):
-    """Raised-cosine ramp from ``a_from`` to ``a_to`` over ``ramp`` samples."""
-    if samples >= ramp:
-        return a_to
-    return a_from + (a_to - a_from) * 0.5 * (1.0 - np.cos(np.pi * samples / ramp))
 
 
 @numba.njit(cache=True)
@@ -221,20 +240,10 @@ def _run_level(
     Writes the level's outcome into ``result`` and, when ``record`` has
     columns, its samples (one row per channel of ``_CHANNELS``).
     """
-    dt = settings[_DT]
-    target = settings[_TARGET]
-    sensing = int(settings[_SENSING])
-    tolerance = settings[_TOLERANCE]
-    lock_periods = int(settings[_LOCK_PERIODS])
-    settling_tolerance = settings[_SETTLING_TOLERANCE]
-    max_hold = int(settings[_MAX_HOLD])
-    ramp = int(settings[_RAMP])
-    n_periods = int(settings[_N_PERIODS])
-    x_max = settings[_X_MAX]
-    harmonics = int(settings[_HARMONICS])
-    kp, ki, mu_dt = control[_KP], control[_KI], control[_MU] * dt
-    omega_low, omega_high = control[_OMEGA_LOW], control[_OMEGA_HIGH]
-    n_sub = int(control[_N_SUB])
+    (
+        dt, target, sensing, max_hold, ramp, n_periods, x_max, harmonics, kp, ki, mu_dt,
+        omega_low, omega_high, n_sub,
+    ) = _loop_settings(settings, control)  # fmt: skip
     c_ms, k_t, f_s = microslip[0], microslip[1], microslip[2]
     recording = record.shape[1] > 0
 
@@ -243,10 +252,7 @@ def _run_level(
     control_on = state[_CONTROL_ON] > 0.0
     detector = state[_DETECTOR:]
     forcing = np.empty(2 * n_sub + 1)
-    result[:] = np.nan
-    result[_LOCKED] = 0.0
-    result[_DIVERGED] = 0.0
-    result[_MEASURE_START] = -1.0
+    _clear_result(result)
 
     locked_count = 0
     measuring = False
@@ -273,22 +279,7 @@ def _run_level(
         else:
             y = acc
 
-        # Adaptive Fourier detector: LMS fit of the mean and `harmonics` harmonics in θ.
-        fit = detector[0] + detector[1] * s + detector[2] * c
-        sk, ck = s, c
-        for k in range(3, 2 * harmonics + 1, 2):
-            sk, ck = sk * c + ck * s, ck * c - sk * s
-            fit += detector[k] * sk + detector[k + 1] * ck
-        residual = mu_dt * (y - fit)
-        detector[0] += 0.5 * residual  # the mean's gain halved: same time constant 2/μ
-        detector[1] += residual * s
-        detector[2] += residual * c
-        sk, ck = s, c
-        for k in range(3, 2 * harmonics + 1, 2):
-            sk, ck = sk * c + ck * s, ck * c - sk * s
-            detector[k] += residual * sk
-            detector[k + 1] += residual * ck
-        phase = np.arctan2(detector[2], detector[1])  # y₁ = |Y| sin(θ + phase)
+        phase = _detect(detector, y, s, c, harmonics, mu_dt)
         error = _wrap(phase - target)
 
         # PI controller with anti-windup at the frequency limits.
@@ -300,55 +291,31 @@ def _run_level(
             record[0, n] = x
             record[1, n] = v
             record[2, n] = acc
-            record[3, n] = a_base
-            record[4, n] = -amplitude * c / omega
-            record[5, n] = omega / (2.0 * np.pi)
-            record[6, n] = theta
-            record[7, n] = np.degrees(_wrap(phase - settings[_REFERENCE]))
-            record[8, n] = amplitude
+            _record_loop(record, 3, n, a_base, amplitude, c, theta, omega, phase, settings)
 
         if n == ramp:  # the hold starts; the first level's controller switches on here
             control_on = True
             next_boundary = theta + 2.0 * np.pi
         elif n > ramp and theta >= next_boundary:  # a period completed: lock detector
             next_boundary += 2.0 * np.pi
-            magnitude = np.hypot(detector[1], detector[2])
-            # Power-balance damping ratio from the detector: |Q_b| / (2|Q|), |Q| = |Y| / ω^k.
-            damping = amplitude * omega**sensing / (2.0 * omega**2 * magnitude)
-            change = abs(magnitude - magnitude_previous) / magnitude
-            steady = change <= settling_tolerance * 2.0 * np.pi * damping
-            ok = abs(error) <= tolerance and steady and omega_low < omega < omega_high
-            magnitude_previous = magnitude
-            if measuring and not ok:
-                measuring = False
-                locked_count = 0
-            elif not measuring:
-                locked_count = locked_count + 1 if ok else 0
-                if locked_count >= lock_periods:
-                    measuring = True
-                    remaining = 2.0 * np.pi * n_periods
-                    duration = 0.0
-                    q_x = q_y = q_base = 0j
-                    result[_MEASURE_START] = n
+            measuring, locked_count, magnitude_previous, start = _lock_step(
+                settings, control, detector, error, 1.0, amplitude, omega, magnitude_previous,
+                measuring, locked_count,
+            )  # fmt: skip
+            if start:
+                remaining = 2.0 * np.pi * n_periods
+                duration = 0.0
+                q_x = q_y = q_base = 0j
+                result[_MEASURE_START] = n
         if measuring:
-            # Left Riemann sum in θ over exactly n_periods periods.
-            weight = omega * dt
-            if weight >= remaining:
-                weight = remaining
-                done = True
-            remaining -= weight
-            duration += weight / omega
-            rotation = complex(c, -s) * weight
+            _, remaining, duration, rotation, done = _measure_step(
+                omega, dt, remaining, duration, c, s
+            )
             q_x += x * rotation
             q_y += y * rotation
             q_base += a_base * rotation
 
-        forcing[0] = a_base
-        for j in range(1, 2 * n_sub + 1):
-            fraction = j / (2.0 * n_sub)
-            forcing[j] = _ramp(a_from, a_to, n + fraction, ramp) * np.sin(
-                theta + omega * dt * fraction
-            )
+        _excitation_samples(forcing, a_base, a_from, a_to, n, ramp, theta, omega * dt)
         x, v, xa, fa = _advance(
             indices, coefficients, shapes, c_ms, k_t, f_s, x, v, xa, fa, acc, dt / n_sub, forcing
         )
@@ -360,19 +327,8 @@ def _run_level(
     state[_X], state[_V], state[_XA], state[_FA] = x, v, xa, fa
     state[_THETA], state[_OMEGA], state[_INTEGRAL] = theta, omega, integral
     state[_CONTROL_ON] = 1.0 if control_on else 0.0
-    result[_N_SAMPLES] = n
-    if done:
-        frequency = n_periods / duration
-        amplitude_x = abs(q_x) / (np.pi * n_periods)
-        amplitude_base = abs(q_base) / (np.pi * n_periods) / (2.0 * np.pi * frequency) ** 2
-        result[_AMPLITUDE] = amplitude_x
-        result[_FREQUENCY] = frequency
-        result[_DAMPING] = amplitude_base / (2.0 * amplitude_x)
-        phase_difference = np.arctan2(q_y.imag, q_y.real) - np.arctan2(q_base.imag, q_base.real)
-        result[_PHASE_ERROR] = np.degrees(_wrap(phase_difference - target))
-        result[_LOCKED] = 1.0
-    elif result[_DIVERGED] == 0.0:
-        result[_PHASE_ERROR] = np.degrees(error)
+    amplitude_x = abs(q_x) / (np.pi * n_periods)
+    _close_level(result, n, done, amplitude_x, 1.0, q_base, q_y, duration, n_periods, target, error)
 
 
 @numba.njit(cache=True)

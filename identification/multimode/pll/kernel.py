@@ -2,8 +2,9 @@
 
 The loop is the one-mode PLL's (:mod:`identification.analytical.pll.closed_loop`:
 same settings and control vectors, the same phase detector, controller, level
-schedule and lock detector) with the scalar state ``(x, ẋ)`` replaced by the modal
-state ``(η, η̇)`` of a :class:`~identification.multimode.model.ModalModel`::
+schedule and lock detector, from :mod:`identification.analytical.pll.loop`) with
+the scalar state ``(x, ẋ)`` replaced by the modal state ``(η, η̇)`` of a
+:class:`~identification.multimode.model.ModalModel`::
 
     η̈_m = w_m u(t) − 2ζ_m ω_m η̇_m − ω_m² η_m − Σ_e φ_{j(e) m} g_e(q_j, q̇_j) − couplings_m
 
@@ -40,36 +41,22 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from identification.analytical.pll.closed_loop import (
-    _AMPLITUDE,
-    _DAMPING,
+from identification.analytical.pll.loop import (
     _DIVERGED,
-    _DT,
-    _FREQUENCY,
     _HARMONICS,
-    _KI,
-    _KP,
-    _LOCK_PERIODS,
     _LOCKED,
-    _MAX_HOLD,
     _MEASURE_START,
-    _MU,
-    _N_PERIODS,
     _N_RESULTS,
-    _N_SAMPLES,
-    _N_SUB,
-    _OMEGA_HIGH,
     _OMEGA_INITIAL,
-    _OMEGA_LOW,
-    _PHASE_ERROR,
-    _RAMP,
-    _REFERENCE,
-    _SENSING,
-    _SETTLING_TOLERANCE,
-    _TARGET,
-    _TOLERANCE,
-    _X_MAX,
+    _clear_result,
+    _close_level,
+    _detect,
+    _excitation_samples,
+    _lock_step,
+    _loop_settings,
+    _measure_step,
     _ramp,
+    _record_loop,
     _wrap,
 )
 from identification.effects import jenkins_force, memoryless_force
@@ -172,40 +159,6 @@ def _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, 
                 xa[e] = q
 
 
-@numba.njit(cache=True, inline="always")
-def _detect(detector, y, s, c, harmonics, mu_dt):
-    """One LMS step of the one-mode loop's adaptive Fourier detector; the fundamental's phase.
-
-    ``detector`` holds ``c₀, a₁, b₁, …``; ``s, c`` are ``sin θ, cos θ``; the fit is
-    ``y₁ = |Y| sin(θ + phase)``.
-    """
-    fit = detector[0] + detector[1] * s + detector[2] * c
-    sk, ck = s, c
-    for i in range(3, 2 * harmonics + 1, 2):
-        sk, ck = sk * c + ck * s, ck * c - sk * s
-        fit += detector[i] * sk + detector[i + 1] * ck
-    residual = mu_dt * (y - fit)
-    detector[0] += 0.5 * residual  # the mean's gain halved: same time constant 2/μ
-    detector[1] += residual * s
-    detector[2] += residual * c
-    sk, ck = s, c
-    for i in range(3, 2 * harmonics + 1, 2):
-        sk, ck = sk * c + ck * s, ck * c - sk * s
-        detector[i] += residual * sk
-        detector[i + 1] += residual * ck
-    return np.arctan2(detector[2], detector[1])
-
-
-@numba.njit(cache=True, inline="always")
-def _excitation_samples(forcing, u, a_from, a_to, k, ramp, theta, step):
-    """The excitation at the RK4 half sub-steps of sample ``k`` (phase advancing by ``step``)."""
-    n_half = forcing.size - 1
-    forcing[0] = u
-    for j in range(1, n_half + 1):
-        fraction = j / n_half
-        forcing[j] = _ramp(a_from, a_to, k + fraction, ramp) * np.sin(theta + step * fraction)
-
-
 @numba.njit(cache=True)
 def initial_state(omega, harmonics, n_modes, n_elements):
     """State vector at rest: oscillator at ``omega``, detector, ``η, η̇`` and anchors zero."""
@@ -226,26 +179,17 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
     Fourier coefficients per mode) and, when ``record`` has columns, its samples
     (the rows of :data:`CHANNELS`, then ``η``, ``η̇``, ``η̈`` of every mode).
     """
-    dt = settings[_DT]
-    target = settings[_TARGET]
-    sensing = int(settings[_SENSING])
-    tolerance = settings[_TOLERANCE]
-    lock_periods = int(settings[_LOCK_PERIODS])
-    settling_tolerance = settings[_SETTLING_TOLERANCE]
-    max_hold = int(settings[_MAX_HOLD])
-    ramp = int(settings[_RAMP])
-    n_periods = int(settings[_N_PERIODS])
-    x_max = settings[_X_MAX]
-    harmonics = int(settings[_HARMONICS])
-    kp, ki, mu_dt = control[_KP], control[_KI], control[_MU] * dt
-    omega_low, omega_high = control[_OMEGA_LOW], control[_OMEGA_HIGH]
-    n_sub = int(control[_N_SUB])
+    (
+        dt, target, sensing, max_hold, ramp, n_periods, x_max, harmonics, kp, ki, mu_dt,
+        omega_low, omega_high, n_sub,
+    ) = _loop_settings(settings, control)  # fmt: skip
     n = modal.shape[0]
     n_elements = el_int.shape[0]
     # The power balance of the target mode is |w_t||U| / (2ω²|Q_t|); during the
-    # hold |Q_t| is read from the detector as |Y| / (|c_t| ω^s).
+    # hold |Q_t| is read from the detector as |Y| / (|c_t| ω^s), hence the lock
+    # detector's gain |w_t||c_t|.
     weight = abs(modal[target_mode, _WEIGHT])
-    lock_gain = abs(lock[target_mode])
+    lock_gain = weight * abs(lock[target_mode])
     recording = record.shape[1] > 0
     n_channels = len(CHANNELS)
 
@@ -261,10 +205,7 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
         work[_V, m] = state[offset + n + m]
     forcing = np.empty(2 * n_sub + 1)
     q_modes = np.zeros((n, PARTICIPATION_HARMONICS + 1), dtype=np.complex128)
-    result[:] = np.nan
-    result[_LOCKED] = 0.0
-    result[_DIVERGED] = 0.0
-    result[_MEASURE_START] = -1.0
+    _clear_result(result)
 
     locked_count = 0
     measuring = False
@@ -305,12 +246,7 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
             omega = min(max(integral + kp * error, omega_low), omega_high)
 
         if recording:
-            record[0, k] = u
-            record[1, k] = -amplitude * c / omega
-            record[2, k] = omega / (2.0 * np.pi)
-            record[3, k] = theta
-            record[4, k] = np.degrees(_wrap(phase - settings[_REFERENCE]))
-            record[5, k] = amplitude
+            _record_loop(record, 0, k, u, amplitude, c, theta, omega, phase, settings)
             for m in range(n):
                 for row in range(3):
                     record[n_channels + row * n + m, k] = work[row, m]
@@ -320,33 +256,20 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
             next_boundary = theta + 2.0 * np.pi
         elif k > ramp and theta >= next_boundary:
             next_boundary += 2.0 * np.pi
-            magnitude = np.hypot(detector[1], detector[2])
-            # Power balance of the locked mode from the detector: |w_t| |U| / (2ω²|Q_t|).
-            damping = weight * lock_gain * amplitude * omega**sensing / (2.0 * omega**2 * magnitude)
-            change = abs(magnitude - magnitude_previous) / magnitude
-            steady = change <= settling_tolerance * 2.0 * np.pi * damping
-            ok = abs(error) <= tolerance and steady and omega_low < omega < omega_high
-            magnitude_previous = magnitude
-            if measuring and not ok:
-                measuring = False
-                locked_count = 0
-            elif not measuring:
-                locked_count = locked_count + 1 if ok else 0
-                if locked_count >= lock_periods:
-                    measuring = True
-                    remaining = 2.0 * np.pi * n_periods
-                    duration = 0.0
-                    q_y = q_base = 0j
-                    q_modes[:] = 0j
-                    result[_MEASURE_START] = k
+            measuring, locked_count, magnitude_previous, start = _lock_step(
+                settings, control, detector, error, lock_gain, amplitude, omega,
+                magnitude_previous, measuring, locked_count,
+            )  # fmt: skip
+            if start:
+                remaining = 2.0 * np.pi * n_periods
+                duration = 0.0
+                q_y = q_base = 0j
+                q_modes[:] = 0j
+                result[_MEASURE_START] = k
         if measuring:
-            step = omega * dt
-            if step >= remaining:
-                step = remaining
-                done = True
-            remaining -= step
-            duration += step / omega
-            rotation = complex(c, -s) * step
+            step, remaining, duration, rotation, done = _measure_step(
+                omega, dt, remaining, duration, c, s
+            )
             q_y += y * rotation
             q_base += u * rotation
             turn = rotation
@@ -371,10 +294,8 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
     for m in range(n):
         state[offset + m] = work[_X, m]
         state[offset + n + m] = work[_V, m]
-    result[_N_SAMPLES] = k
+    scale = np.pi * n_periods
     if done:
-        frequency = n_periods / duration
-        scale = np.pi * n_periods
         for m in range(n):
             row = _N_RESULTS + m * _N_COEFFICIENTS
             result[row] = q_modes[m, 0].real / (2.0 * scale)
@@ -382,16 +303,10 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
                 # Σ η e^{−ihθ} dθ = πn (C_h − i S_h)
                 result[row + 2 * h - 1] = q_modes[m, h].real / scale
                 result[row + 2 * h] = -q_modes[m, h].imag / scale
-        amplitude_t = abs(q_modes[target_mode, 1]) / scale
-        amplitude_u = abs(q_base) / scale / (2.0 * np.pi * frequency) ** 2
-        result[_AMPLITUDE] = amplitude_t
-        result[_FREQUENCY] = frequency
-        result[_DAMPING] = weight * amplitude_u / (2.0 * amplitude_t)
-        phase_difference = np.arctan2(q_y.imag, q_y.real) - np.arctan2(q_base.imag, q_base.real)
-        result[_PHASE_ERROR] = np.degrees(_wrap(phase_difference - target))
-        result[_LOCKED] = 1.0
-    elif result[_DIVERGED] == 0.0:
-        result[_PHASE_ERROR] = np.degrees(error)
+    amplitude_t = abs(q_modes[target_mode, 1]) / scale
+    _close_level(
+        result, k, done, amplitude_t, weight, q_base, q_y, duration, n_periods, target, error
+    )
 
 
 @numba.njit(cache=True)
