@@ -17,6 +17,7 @@ import json
 import os
 import queue
 import shutil
+import signal
 import subprocess
 import tempfile
 import threading
@@ -186,13 +187,17 @@ def open_page(page: str | os.PathLike, browser: str, timeout: float = 120.0) -> 
         os.dup2(command_read, 3)
         os.dup2(answer_write, 4)
 
-    with tempfile.TemporaryDirectory(prefix="pm-joint-browser-") as profile:
+    # Chromium's helper processes may still write to the profile while it is removed: a
+    # leftover file there is no finding about the page.
+    with tempfile.TemporaryDirectory(
+        prefix="pm-joint-browser-", ignore_cleanup_errors=True
+    ) as profile:
         process = subprocess.Popen(
             [browser, "--headless", "--remote-debugging-pipe", "--no-sandbox", "--disable-gpu",
              "--disable-dev-shm-usage", "--no-first-run", "--no-default-browser-check",
              "--disable-extensions", f"--user-data-dir={profile}", "about:blank"],
-            pass_fds=(3, 4), preexec_fn=place_pipes, stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            pass_fds=(3, 4), preexec_fn=place_pipes, start_new_session=True,
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
         )  # fmt: skip
         os.close(command_read)
         os.close(answer_write)
@@ -212,8 +217,9 @@ def open_page(page: str | os.PathLike, browser: str, timeout: float = 120.0) -> 
             with contextlib.suppress(Exception):
                 pipe.call("Browser.close", timeout=10)
         finally:
-            with contextlib.suppress(ProcessLookupError):
-                process.kill()
+            # The whole process group: the renderer and GPU helpers go with the browser.
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(process.pid, signal.SIGKILL)
             process.wait(timeout=30)
     return PageCheck(
         title=shown["title"],
