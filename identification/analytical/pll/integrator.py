@@ -20,11 +20,12 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from identification.analytical.coefficients import small_amplitude_stiffness
 from identification.analytical.harmonic import CoefficientTable, coefficient_table
 from identification.analytical.pll.config import _check_positive
 from identification.effects import (
     CATALOGUE,
-    LINEAR_STIFFNESS,
+    HYSTERETIC,
     VISCOUS_DAMPING,
     jenkins_force,
     memoryless_force,
@@ -95,7 +96,7 @@ def _linear_coefficients(table: CoefficientTable) -> tuple[np.ndarray, np.ndarra
     def total(effect: str) -> np.ndarray:
         return coefficients[:, table.indices == CATALOGUE[effect].index].sum(axis=1)
 
-    stiffness = total(LINEAR_STIFFNESS) + table.microslip[:, 0] * table.microslip[:, 1]
+    stiffness = small_amplitude_stiffness(table)
     damping = total(VISCOUS_DAMPING)
     slope = np.abs(damping)
     for i, index in enumerate(table.indices):
@@ -109,7 +110,8 @@ def _linear_coefficients(table: CoefficientTable) -> tuple[np.ndarray, np.ndarra
 def _substeps(table: CoefficientTable, dt: float) -> np.ndarray:
     """Sub-steps per sample keeping the linearised eigenvalues in RK4's stability region."""
     stiffness, _, slope = _linear_coefficients(table)
-    stiffness = np.abs(stiffness) + np.abs(table.microslip[:, 0] * table.microslip[:, 1])
+    stuck = HYSTERETIC.stuck_stiffness(table.hysteretic[:, 0], table.hysteretic_shape())
+    stiffness = np.abs(stiffness) + np.abs(stuck)
     largest_eigenvalue = 0.5 * slope + np.sqrt(0.25 * slope**2 + stiffness)
     return np.maximum(1, np.ceil(largest_eigenvalue * dt / _RK4_STABLE_STEP)).astype(np.int64)
 
