@@ -169,6 +169,19 @@ class JsonDocument:
         """Write the record as JSON (atomically), with its hash and the versions writing it."""
         return write_json_document(path, self.to_dict())
 
+    @staticmethod
+    def check_content(data: dict[str, Any], record: Any, source: str, what: str) -> None:
+        """Refuse ``record`` read from ``data`` when the hash ``data`` recorded (if any) is
+        not that of its content (:class:`IntegrityError` naming ``source`` and ``what``)."""
+        if "content_sha256" in data:
+            check_sha256(
+                data["content_sha256"],
+                record.content_sha256,
+                source,
+                what,
+                hint=" (remove 'content_sha256' to accept a deliberate edit)",
+            )
+
     @classmethod
     def from_json(cls, path: str | Path) -> Any:
         """Read a record written by :meth:`to_json`; ValueError naming the file if it is bad."""

@@ -27,7 +27,6 @@ import numpy as np
 
 from identification.artifacts import (
     JsonDocument,
-    check_sha256,
     sha256_json,
 )
 from identification.effects import (
@@ -393,14 +392,7 @@ class JointModel(JsonDocument):
                         forcing_gain=None if gain is None else float(gain))  # fmt: skip
         except (TypeError, ValueError) as exc:
             raise ValueError(f"{source}: {exc}") from None
-        if "content_sha256" in data:
-            check_sha256(
-                data["content_sha256"],
-                model.content_sha256,
-                source,
-                "the terms",
-                hint=" (remove 'content_sha256' to accept a deliberate edit)",
-            )
+        cls.check_content(data, model, source, "the terms")
         return model
 
     # ----------------------------------------------------------------- presets

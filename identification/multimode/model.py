@@ -38,7 +38,6 @@ import numpy as np
 
 from identification.artifacts import (
     JsonDocument,
-    check_sha256,
     sha256_json,
 )
 from identification.effects import LINEAR_STIFFNESS, VISCOUS_DAMPING, get_effect
@@ -408,14 +407,7 @@ class ModalModel(JsonDocument):
             if str(exc).startswith(source):
                 raise
             raise ValueError(f"{source}: {exc}") from None
-        if "content_sha256" in data:
-            check_sha256(
-                data["content_sha256"],
-                model.content_sha256,
-                source,
-                "the model",
-                hint=" (remove 'content_sha256' to accept a deliberate edit)",
-            )
+        cls.check_content(data, model, source, "the model")
         return model
 
 
