@@ -70,6 +70,7 @@ with no positive linear stiffness when no initial frequency is given.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numba
@@ -484,8 +485,27 @@ def simulate_pll(
     return _recorded_run(arrays, control[0], settings, excitation_m_s2, out, config.fs)
 
 
-def _recorded_run(arrays, control, settings, excitation_m_s2, out, fs) -> PLLResult:
-    """Level by level through the same kernel as :func:`_backbone`, keeping the samples."""
+@dataclass(frozen=True)
+class RecordedLevels:
+    """The samples of a recorded run, level after level, and where each level's hold and
+    measurement lie in them (``(start, end)`` sample indices, -1 where there is none)."""
+
+    samples: np.ndarray
+    level_index: np.ndarray
+    holds: np.ndarray
+    measurements: np.ndarray
+
+
+def record_levels(
+    run: Callable[[float, float, np.ndarray, np.ndarray], None] | None,
+    excitation_m_s2: np.ndarray,
+    out: np.ndarray,
+    n_rows: int,
+    settings: np.ndarray,
+) -> RecordedLevels:
+    """Run ``run(a_from, a_to, buffer, out_row)`` level by level, keeping the ``n_rows``
+    channels it writes into ``buffer``; None runs nothing (no initial frequency). Stops
+    after a level that diverged. Shared by the one-mode and the N-mode recorded runs."""
     out[:] = np.nan
     out[:, _LOCKED] = 0.0
     n_levels = excitation_m_s2.size
@@ -493,12 +513,11 @@ def _recorded_run(arrays, control, settings, excitation_m_s2, out, fs) -> PLLRes
     measurements = np.full((n_levels, 2), -1, dtype=np.int64)
     pieces, indices = [], []
     ramp, max_hold = int(settings[_RAMP]), int(settings[_MAX_HOLD])
-    if control[_OMEGA_INITIAL] > 0.0:
-        state = _initial_state(control[_OMEGA_INITIAL], int(settings[_HARMONICS]))
-        buffer = np.empty((len(_CHANNELS), ramp + max_hold + 1))
+    if run is not None:
+        buffer = np.empty((n_rows, ramp + max_hold + 1))
         start, a_from = 0, 0.0
         for j, a_to in enumerate(excitation_m_s2):
-            _run_level(*arrays, control, settings, state, a_from, a_to, buffer, out[j])
+            run(a_from, a_to, buffer, out[j])
             n = int(out[j, _N_SAMPLES])
             pieces.append(buffer[:, :n].copy())
             indices.append(np.full(n, j, dtype=np.int64))
@@ -510,14 +529,27 @@ def _recorded_run(arrays, control, settings, excitation_m_s2, out, fs) -> PLLRes
             if out[j, _DIVERGED] > 0:
                 break
             a_from = a_to
-    samples = np.concatenate(pieces, axis=1) if pieces else np.empty((len(_CHANNELS), 0))
-    channels = dict(zip(_CHANNELS, samples, strict=True))
+    samples = np.concatenate(pieces, axis=1) if pieces else np.empty((n_rows, 0))
+    level_index = np.concatenate(indices) if indices else np.empty(0, dtype=np.int64)
+    return RecordedLevels(samples, level_index, holds, measurements)
+
+
+def _recorded_run(arrays, control, settings, excitation_m_s2, out, fs) -> PLLResult:
+    """Level by level through the same kernel as :func:`_backbone`, keeping the samples."""
+    run = None
+    if control[_OMEGA_INITIAL] > 0.0:
+        state = _initial_state(control[_OMEGA_INITIAL], int(settings[_HARMONICS]))
+
+        def run(a_from, a_to, buffer, row):
+            _run_level(*arrays, control, settings, state, a_from, a_to, buffer, row)
+
+    recorded = record_levels(run, excitation_m_s2, out, len(_CHANNELS), settings)
     series = PLLTimeSeries(
         fs=fs,
-        t=np.arange(samples.shape[1]) / fs,
-        level_index=np.concatenate(indices) if indices else np.empty(0, dtype=np.int64),
-        holds=holds,
-        measurements=measurements,
-        **channels,
+        t=np.arange(recorded.samples.shape[1]) / fs,
+        level_index=recorded.level_index,
+        holds=recorded.holds,
+        measurements=recorded.measurements,
+        **dict(zip(_CHANNELS, recorded.samples, strict=True)),
     )
     return _result(excitation_m_s2, out, series)

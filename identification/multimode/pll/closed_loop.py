@@ -46,29 +46,25 @@ from identification.analytical.harmonic import CoefficientTable
 from identification.analytical.pll.closed_loop import (
     _AMPLITUDE,
     _DAMPING,
-    _DIVERGED,
     _FREQUENCY,
     _HARMONICS,
     _KI,
     _KP,
     _LOCKED,
-    _MAX_HOLD,
-    _MEASURE_START,
     _MU,
     _N_CONTROL,
     _N_RESULTS,
-    _N_SAMPLES,
     _N_SUB,
     _OMEGA_HIGH,
     _OMEGA_INITIAL,
     _OMEGA_LOW,
     _PHASE_ERROR,
-    _RAMP,
     _REFERENCE,
     _SENSING,
     _TARGET,
     _check_timing,
     _settings,
+    record_levels,
 )
 from identification.analytical.pll.config import PLLConfig, _pole_placement
 from identification.analytical.pll.integrator import _RK4_STABLE_STEP, _linear_coefficients
@@ -431,36 +427,19 @@ def simulate_modal_pll(
 
 def _recorded_run(mode, args, setup, excitation, out, fs, n_modes) -> ModalPLLResult:
     """Level by level through the same kernel as :func:`kernel.backbone`, keeping the samples."""
-    out[:] = np.nan
-    out[:, _LOCKED] = 0.0
     settings = setup.settings
-    n_levels = excitation.size
-    holds = np.full((n_levels, 2), -1, dtype=np.int64)
-    measurements = np.full((n_levels, 2), -1, dtype=np.int64)
-    n_rows = len(CHANNELS) + 3 * n_modes
-    pieces, indices = [], []
-    ramp, max_hold = int(settings[_RAMP]), int(settings[_MAX_HOLD])
     control = setup.control[0]
+    run = None
     if control[_OMEGA_INITIAL] > 0.0:
         state = kernel.initial_state(control[_OMEGA_INITIAL], int(settings[_HARMONICS]), n_modes,
                                      setup.arrays.el_int.shape[0])  # fmt: skip
-        buffer = np.empty((n_rows, ramp + max_hold + 1))
-        start, a_from = 0, 0.0
-        for j, a_to in enumerate(excitation):
-            kernel.run_level(*args, state, a_from, a_to, buffer, out[j])
-            n = int(out[j, _N_SAMPLES])
-            pieces.append(buffer[:, :n].copy())
-            indices.append(np.full(n, j, dtype=np.int64))
-            if n > ramp:
-                holds[j] = start + ramp, start + n
-            if out[j, _LOCKED] > 0:
-                measurements[j] = start + int(out[j, _MEASURE_START]), start + n
-            start += n
-            if out[j, _DIVERGED] > 0:
-                break
-            a_from = a_to
-    samples = np.concatenate(pieces, axis=1) if pieces else np.empty((n_rows, 0))
+
+        def run(a_from, a_to, buffer, row):
+            kernel.run_level(*args, state, a_from, a_to, buffer, row)
+
     head = len(CHANNELS)
+    recorded = record_levels(run, excitation, out, head + 3 * n_modes, settings)
+    samples = recorded.samples
     eta, eta_dot, eta_ddot = (samples[head + i * n_modes : head + (i + 1) * n_modes]
                               for i in range(3))  # fmt: skip
     sensed = (eta, eta_dot, eta_ddot)[int(settings[_SENSING])]
@@ -471,9 +450,9 @@ def _recorded_run(mode, args, setup, excitation, out, fs, n_modes) -> ModalPLLRe
         eta_dot=eta_dot,
         eta_ddot=eta_ddot,
         sensors=setup.sensors @ sensed,
-        level_index=np.concatenate(indices) if indices else np.empty(0, dtype=np.int64),
-        holds=holds,
-        measurements=measurements,
+        level_index=recorded.level_index,
+        holds=recorded.holds,
+        measurements=recorded.measurements,
         **dict(zip(CHANNELS, samples[:head], strict=True)),
     )
     return _result(mode, excitation, out, n_modes, series)
