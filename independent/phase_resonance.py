@@ -15,11 +15,11 @@ holds. What a test's hold fit reads from that state, as the library defines its 
 
 Method: the periodic state is written as a Fourier series of ``H`` harmonics (default 12),
 sampled at ``N`` points per period; the force is evaluated on the samples (a hysteretic
-force marched period after period from rest until its loop closes) and projected by the FFT;
-Newton's method with a forward-difference Jacobian and a backtracking step solves the
-balance of the mean, the fundamental's cosine (which fixes ``ω``) and every higher harmonic,
-while the fundamental's sine gives ``A``. All cases (joints × amplitudes) are solved at once
-as arrays, started from the fundamental-only balance at each amplitude.
+force marched period after period until its loop closes) and projected by the FFT;
+Broyden's method from a forward-difference Jacobian, with backtracking Newton steps where it
+stalls, solves the balance of the mean, the fundamental's cosine (which fixes ``ω``) and every
+higher harmonic, while the fundamental's sine gives ``A``. All cases (joints × amplitudes)
+are solved at once as arrays, started from the fundamental-only balance at each amplitude.
 """
 
 from __future__ import annotations
@@ -155,40 +155,67 @@ class _Balance:
         return z[:, 0]
 
 
-def _newton(balance: _Balance, settings: BalanceSettings) -> tuple[np.ndarray, np.ndarray, ...]:
-    """Unknowns, ``A`` and convergence of every case (damped Newton, all cases together)."""
-    z = balance.start()
+def _jacobian(balance: _Balance, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Residual ``(rows, m)`` and its forward-difference Jacobian ``(rows, m, m)`` at ``z``."""
     m = z.shape[1]
     steps = np.concatenate([np.zeros((1, m)), _STEP * np.eye(m)])
-    converged = np.zeros(z.shape[0], dtype=bool)
-    residual, _ = balance(z[:, None])
-    norm = np.max(np.abs(residual[:, 0]), axis=-1)
+    probe, _ = balance(z[:, None, :] + steps)
+    return probe[:, 0], np.swapaxes((probe[:, 1:] - probe[:, :1]) / _STEP, 1, 2)
+
+
+def _solve(jacobian: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """Newton steps ``−J⁻¹ r`` of every case (least squares where ``J`` is singular)."""
+    with np.errstate(all="ignore"):
+        try:
+            return -np.linalg.solve(jacobian, residual[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            return -(np.linalg.pinv(jacobian) @ residual[..., None])[..., 0]
+
+
+def _newton(balance: _Balance, settings: BalanceSettings) -> tuple[np.ndarray, np.ndarray, ...]:
+    """Unknowns, ``A`` and convergence of every case, all cases together.
+
+    Broyden's method from a forward-difference Jacobian: each iteration costs one residual,
+    and a case whose residual does not fall gets a fresh Jacobian and a backtracking Newton step
+    (halved until it falls).
+    """
+    z = balance.start()
+    residual, jacobian = _jacobian(balance, z)
+    norm = np.max(np.abs(residual), axis=-1)
+    fresh = True
     for _ in range(settings.max_iter):
-        converged = norm < settings.tol
-        active = ~converged & np.isfinite(norm)
+        active = (norm >= settings.tol) & np.isfinite(norm)
         if not active.any():
             break
-        probe, _ = balance(z[:, None, :] + steps)
-        jacobian = np.swapaxes((probe[:, 1:] - probe[:, :1]) / _STEP, 1, 2)
-        with np.errstate(all="ignore"):
-            try:
-                dz = -np.linalg.solve(jacobian, probe[:, 0, :, None])[..., 0]
-            except np.linalg.LinAlgError:
-                dz = -(np.linalg.pinv(jacobian) @ probe[:, 0, :, None])[..., 0]
-        dz[~active] = 0.0
+        dz = np.where(active[:, None], _solve(jacobian, residual), 0.0)
         alpha = np.ones(z.shape[0])
-        for _ in range(12):  # halve the step of cases whose residual grew
+        for _ in range(12 if fresh else 1):  # halve the step of cases whose residual grew
             trial = z + alpha[:, None] * dz
-            residual, _ = balance(trial[:, None])
-            trial_norm = np.max(np.abs(residual[:, 0]), axis=-1)
+            trial_residual, _ = balance(trial[:, None])
+            trial_residual = trial_residual[:, 0]
+            trial_norm = np.max(np.abs(trial_residual), axis=-1)
             better = (trial_norm < norm) | ~active
             if better.all():
                 break
             alpha = np.where(better, alpha, 0.5 * alpha)
+        # Broyden's rank-one update on the accepted step: J += (Δr − J Δz) Δzᵀ / |Δz|².
+        step = trial - z
+        with np.errstate(all="ignore"):
+            update = (trial_residual - residual - (jacobian @ step[..., None])[..., 0])[
+                ..., None
+            ] * (step / np.sum(step * step, axis=-1, keepdims=True))[:, None, :]
+        take = better & active
+        jacobian = np.where(take[:, None, None], jacobian + update, jacobian)
         z = np.where(better[:, None], trial, z)
+        residual = np.where(better[:, None], trial_residual, residual)
         norm = np.where(better, trial_norm, norm)
-        if not better[active].any():
-            break
+        if better.all():
+            fresh = False
+        elif fresh and not take.any():
+            break  # no case moves even on a fresh Jacobian
+        else:
+            residual, jacobian = _jacobian(balance, z)
+            fresh = True
     converged = norm < settings.tol
     _, base = balance(z[:, None])
     return z, base[:, 0], converged
