@@ -122,14 +122,6 @@ def hilbert_backbone(
     over a period; ten periods at each end (the filter's and the transform's end effects) are
     dropped. Returns the amplitude (m) and frequency (Hz), in time order.
     """
-    _, amplitude, frequency = _hilbert(time_s, displacement_m, band_hz)
-    return amplitude, frequency
-
-
-def _hilbert(
-    time_s: np.ndarray, displacement_m: np.ndarray, band_hz: tuple[float, float]
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`hilbert_backbone` with the times of its samples first."""
     from scipy import signal
 
     fs_hz = (time_s.size - 1) / (time_s[-1] - time_s[0])
@@ -141,7 +133,7 @@ def _hilbert(
     amplitude = np.convolve(np.abs(analytic), kernel, mode="same")
     frequency = np.convolve(frequency, kernel, mode="same")
     inside = slice(10 * period, -10 * period)
-    return time_s[inside], amplitude[inside], frequency[inside]
+    return amplitude[inside], frequency[inside]
 
 
 # ---------------------------------------------------------------------------
@@ -363,19 +355,42 @@ class DecayBackbone:
 def modal_backbones(
     decay: ModalDecay, bands_hz: Sequence[tuple[float, float]]
 ) -> list[DecayBackbone]:
-    """Each mode's decay backbone from its true modal coordinate (:func:`hilbert_backbone` on
-    the mode's band, ``bands_hz[i]`` for mode ``i``), the damping ratio from the envelope's
-    logarithmic decrement per radian.
+    """Each mode's decay backbone from its true modal coordinate: the analytic signal of the
+    mode's band (``bands_hz[i]`` for mode ``i``; 4th-order Butterworth, zero phase), its
+    instantaneous frequency and log-amplitude averaged by a Hann window over 4 periods, the
+    damping ratio from the log-amplitude's slope per radian; 12 periods at each end dropped
+    (the filter's and the transform's end effects).
 
     This is the reference this package offers for a mode's backbone of a ring-down: what a
     modal filter with exact mode shapes and a Hilbert transform would read. Near an internal
     resonance a mode's band also holds the other mode's locked harmonic (2ω1 in mode 2's
     band at 1:2): that content is part of mode 2's coordinate here, as it is of its filter.
     """
+    from scipy import signal
+
+    n = decay.time_s.size
+    fs_hz = (n - 1) / (decay.time_s[-1] - decay.time_s[0])  # the rounded stamps' mean rate
+    time_s = decay.time_s[0] + np.arange(n) / fs_hz
     out = []
-    exact_time = np.arange(decay.time_s.size) * np.median(np.diff(decay.time_s))
     for q, band in zip(decay.modal_displacement, bands_hz, strict=True):
-        t, amplitude, frequency = _hilbert(exact_time, q, band)
-        rate = np.gradient(np.log(amplitude), t)
-        out.append(DecayBackbone(t, amplitude, frequency, -rate / (2 * np.pi * frequency)))
+        sos = signal.butter(4, band, btype="bandpass", fs=fs_hz, output="sos")
+        analytic = signal.hilbert(signal.sosfiltfilt(sos, q))
+        frequency = np.gradient(np.unwrap(np.angle(analytic)), time_s) / (2 * np.pi)
+        period = fs_hz / np.median(frequency)
+        # A Hann window over 4 periods removes the 2ω ripple of the analytic signal whatever the
+        # period's fraction of a sample (a boxcar of a rounded period leaves a part of it).
+        window = signal.windows.hann(round(4 * period) + 2)[1:-1]
+        window /= window.sum()
+        frequency = np.convolve(frequency, window, mode="same")
+        log_amplitude = np.convolve(np.log(np.abs(analytic)), window, mode="same")
+        rate = np.gradient(log_amplitude, time_s)
+        inside = slice(round(12 * period), n - round(12 * period))
+        out.append(
+            DecayBackbone(
+                time_s[inside],
+                np.exp(log_amplitude[inside]),
+                frequency[inside],
+                -rate[inside] / (2 * np.pi * frequency[inside]),
+            )
+        )
     return out
