@@ -88,6 +88,7 @@ def phase_resonance_campaign(
     amplitudes_mm: Sequence[float] = DEFAULT_AMPLITUDES_MM,
     scatter: PopulationScatter = PopulationScatter(),
     noise: HoldNoise = HoldNoise(),
+    up_down: bool = False,
     settings: BalanceSettings = DEFAULT_BALANCE,
 ) -> BackboneSet:
     """A campaign of ``n_curves`` assemblies of ``joint``, as PLL hold fits measure it.
@@ -100,16 +101,21 @@ def phase_resonance_campaign(
         Assemblies (one backbone each, labelled ``assembly1``, …).
     seed
         Seed of every random draw. Per assembly, in order: its joint
-        (:meth:`JointSpec.drawn`: stiffness, damping, then each term's sizes), its
-        amplitude jitter, then its noise (frequency, damping ratio, harmonics' real and
-        imaginary parts).
+        (:meth:`JointSpec.drawn`: stiffness, damping, then each term's sizes), the
+        amplitude jitter of each branch, then its noise (a ``(6, n_points)`` standard normal
+        draw: frequency, damping ratio, then the real and imaginary parts of harmonics 2
+        and 3).
     amplitudes_mm
         Nominal levels (mm); each assembly holds them jittered by
-        ``scatter.amplitude_jitter``, in increasing order.
+        ``scatter.amplitude_jitter``, in increasing order (then decreasing: ``up_down``).
     scatter
         Population scatter of the assemblies.
     noise
         Measurement noise; ``HoldNoise(0, 0, 0)`` gives the noise-free backbones.
+    up_down
+        Levels stepped up, then down again: a second branch, in decreasing order, with its
+        own amplitude jitter and noise (points carry their hold times, so drift in time can
+        be told from amplitude dependence).
     settings
         The harmonic balance's settings.
 
@@ -127,30 +133,35 @@ def phase_resonance_campaign(
     rng = np.random.default_rng(seed)
     nominal_m = 1e-3 * np.asarray(amplitudes_mm, dtype=float)
     low = nominal_m.min()
-    joints, amplitudes, noises = [], [], []
+    joints, amplitudes, draws = [], [], []
     for _ in range(n_curves):
         joints.append(joint.drawn(rng, scatter.stiffness, scatter.damping, scatter.sizes))
-        jitter = scatter.amplitude_jitter * rng.standard_normal(nominal_m.size)
-        amplitudes.append(np.sort(nominal_m * np.exp(jitter)))
-        noises.append(rng.standard_normal((4, nominal_m.size, 2)))
+        branches = [
+            np.sort(
+                nominal_m * np.exp(scatter.amplitude_jitter * rng.standard_normal(nominal_m.size))
+            )
+            for _ in range(2 if up_down else 1)
+        ]
+        amplitudes.append(np.concatenate([branches[0], *[b[::-1] for b in branches[1:]]]))
+        draws.append(rng.standard_normal((6, amplitudes[-1].size)))
     truth = phase_resonance_backbone(joints, np.array(amplitudes), settings)
     if not truth.converged.all():
         i = int(np.argmax(~truth.converged.all(axis=1)))
         raise RuntimeError(f"no phase-resonant state for assembly {i + 1} of {joint}")
     curves = []
-    for i, (a, draw) in enumerate(zip(amplitudes, noises, strict=True)):
+    for i, (a, draw) in enumerate(zip(amplitudes, draws, strict=True)):
         ratio = low / a
         damping = truth.damping_ratio[i]
         h_noise = noise.harmonic * (1 + ratio)
-        harmonics = truth.harmonics[i, :, :2] + h_noise[:, None] * (draw[2] + 1j * draw[3])
+        measured_harmonics = draw[2::2] + 1j * draw[3::2]  # orders 2 and 3
         curves.append(
             Backbone(
                 a,
-                truth.frequency_hz[i] + noise.frequency_hz * (1 + np.sqrt(ratio)) * draw[0, :, 0],
-                damping + noise.damping * (1 + ratio) * np.abs(damping) * draw[1, :, 0],
+                truth.frequency_hz[i] + noise.frequency_hz * (1 + np.sqrt(ratio)) * draw[0],
+                damping + noise.damping * (1 + ratio) * np.abs(damping) * draw[1],
                 label=f"assembly{i + 1}",
                 source="independent.phase_resonance",
-                harmonics=harmonics,
+                harmonics=truth.harmonics[i, :, :2] + h_noise[:, None] * measured_harmonics.T,
                 harmonic_standard_error=np.repeat(h_noise[:, None], 2, axis=1),
                 mean_offset_m=truth.mean_offset_m[i],
                 time_s=HOLD_S * (np.arange(a.size) + 0.5),

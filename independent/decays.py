@@ -19,6 +19,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -240,6 +241,27 @@ class ModalDecay:
     displacement_m: np.ndarray
     velocity_m_s: np.ndarray
     acceleration_m_s2: np.ndarray
+
+    def write_csv(
+        self, path: str | Path, quantity: str = "displacement", names: Sequence[str] = ()
+    ) -> Path:
+        """Write the time and every sensor's ``quantity`` (``"displacement"``, ``"velocity"``
+        or ``"acceleration"``, SI units) as a CSV file with a header: ``time`` then ``names``
+        (default ``sensor1``, …). Times keep the digits they have (rounded ones stay rounded)."""
+        values = {
+            "displacement": self.displacement_m,
+            "velocity": self.velocity_m_s,
+            "acceleration": self.acceleration_m_s2,
+        }[quantity]
+        names = list(names) or [f"sensor{i + 1}" for i in range(values.shape[0])]
+        if len(names) != values.shape[0]:
+            raise ValueError(f"{values.shape[0]} sensors, {len(names)} names")
+        path = Path(path)
+        np.savetxt(
+            path, np.column_stack([self.time_s, values.T]), delimiter=",",
+            header=",".join(["time", *names]), comments="", fmt=["%.10g"] + ["%.12e"] * len(names),
+        )  # fmt: skip
+        return path
 
 
 def rounded_time_stamps(time_s: ArrayLike, significant_digits: int = 7) -> np.ndarray:

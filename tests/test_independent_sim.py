@@ -153,3 +153,21 @@ def test_a_jenkins_joint_in_a_ring_down_dissipates_masings_energy_per_half_cycle
     masing = f_s * (np.abs(np.diff(x)) - 2 * f_s / k_t)
     assert len(x) >= 6 and np.all(masing > 0)
     np.testing.assert_allclose(lost, masing, rtol=1e-3)
+
+
+def test_a_one_sensor_decay_of_two_modes_near_1_to_2_reads_back_as_written(tmp_path):
+    """The record issue #26's acceptance reads: one sensor, two modes near 1:2 with a q1² q2
+    coupling, 7-digit time stamps, a CSV file the column readers take."""
+    system = ModalSystem((122.0, 243.0), (0.002, 0.003), couplings=(PotentialTerm(1e8, (2, 1)),))
+    decay = modal_free_decay(
+        system, [1e-3, 1e-4], sensor_shapes=[[1.0, 0.6]], fs_hz=5000.0, duration_s=0.05,
+        time_digits=7,
+    )  # fmt: skip
+    path = decay.write_csv(tmp_path / "decay.csv", names=["tip"])
+    table = np.loadtxt(path, delimiter=",", skiprows=1)
+    assert path.read_text().splitlines()[0] == "time,tip"
+    assert np.array_equal(table[:, 0], decay.time_s)
+    np.testing.assert_allclose(table[:, 1], decay.displacement_m[0], rtol=1e-11)
+    np.testing.assert_allclose(
+        decay.displacement_m[0], decay.modal_displacement[0] + 0.6 * decay.modal_displacement[1]
+    )
