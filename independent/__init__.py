@@ -15,7 +15,7 @@ they write test the library rather than repeat it.
 """
 
 from independent.campaigns import HoldNoise, PopulationScatter, phase_resonance_campaign
-from independent.forces import CATALOGUE_FORCES, JointSpec
+from independent.forces import CATALOGUE_FORCES, JointSpec, catalogue_joint
 from independent.phase_resonance import BalanceSettings, phase_resonance_backbone
 
 __all__ = [
@@ -24,6 +24,7 @@ __all__ = [
     "HoldNoise",
     "JointSpec",
     "PopulationScatter",
+    "catalogue_joint",
     "phase_resonance_backbone",
     "phase_resonance_campaign",
 ]

@@ -14,6 +14,7 @@ The equation they enter is ``ẍ + ω0² x + 2 ζ ω0 ẋ + Σ f_i(x, ẋ) = −
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -43,6 +44,7 @@ __all__ = [
     "TanhSaturation",
     "VanDerPol",
     "VelocitySquared",
+    "catalogue_joint",
 ]
 
 #: The sign's regularisation velocity of the friction forces (m/s): ``sign(v) ≈ tanh(v/v_reg)``,
@@ -536,4 +538,28 @@ def stacked(joints: list[JointSpec], shape: tuple[int, ...]) -> JointSpec:
         column([j.natural_frequency_hz for j in joints]),
         column([j.damping_ratio for j in joints]),
         terms,
+    )
+
+
+def catalogue_joint(terms: Mapping[str, float | Mapping[str, float]]) -> JointSpec:
+    """The joint of a catalogue model's terms, written as the library's model files write them:
+    ``{effect name: coefficient}`` or ``{effect name: {"coefficient": c, shape: value, …}}``.
+
+    ``linear_stiffness`` (``ω0²``, 1/s², required) and ``viscous_damping`` (``2 ζ ω0``, 1/s)
+    become :class:`JointSpec`'s ``ω0`` and ``ζ``; every other name is a force of
+    :data:`CATALOGUE_FORCES` with the same coefficient and shape parameters.
+    """
+    values = {
+        name: dict(value) if isinstance(value, Mapping) else {"coefficient": value}
+        for name, value in terms.items()
+    }
+    unknown = sorted(set(values) - set(CATALOGUE_FORCES) - {"linear_stiffness", "viscous_damping"})
+    if unknown or "linear_stiffness" not in values:
+        raise ValueError(f"need linear_stiffness and catalogue effects; unknown: {unknown}")
+    omega0 = float(np.sqrt(values.pop("linear_stiffness")["coefficient"]))
+    damping = values.pop("viscous_damping", {"coefficient": 0.0})["coefficient"]
+    return JointSpec(
+        omega0 / (2 * np.pi),
+        damping / (2 * omega0),
+        tuple(CATALOGUE_FORCES[name](**shape) for name, shape in values.items()),
     )

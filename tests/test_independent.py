@@ -28,6 +28,7 @@ from independent.forces import (
     PreloadedContact,
     QuadraticDamping,
     QuadraticStiffness,
+    catalogue_joint,
 )
 from independent.phase_resonance import BalanceSettings, phase_resonance_backbone
 
@@ -68,6 +69,21 @@ def test_the_independent_package_imports_no_library_code():
         if (bad := foreign_imports(path))
     }
     assert offenders == {}
+
+
+def test_the_library_never_imports_the_independent_package():
+    importers = []
+    for package in ("identification", "surrogates", "pm_joint"):
+        for path in (ROOT / package).rglob("*.py"):
+            text = path.read_text(encoding="utf-8")
+            if "independent" not in text:  # no import of it can be there
+                continue
+            tree = ast.parse(text)
+            names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+            names |= {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+            if any(name.split(".")[0] == "independent" for name in names):
+                importers.append(str(path.relative_to(ROOT)))
+    assert importers == []
 
 
 def test_the_import_check_catches_a_kernel_import(tmp_path):
@@ -290,9 +306,11 @@ def test_the_library_harmonic_balance_matches_the_independent_one(effect):
     from identification.model import JointModel
 
     coefficient, force, (f_tol, d_tol, h_tol) = LIBRARY_CASES[effect]
-    model = JointModel(
-        {"linear_stiffness": W0**2, "viscous_damping": 2 * 0.003 * W0, effect: coefficient}
-    )
+    terms = {"linear_stiffness": W0**2, "viscous_damping": 2 * 0.003 * W0, effect: coefficient}
+    model = JointModel(terms)
+    spec = catalogue_joint(terms)
+    assert spec.terms == (force,)
+    assert (spec.natural_frequency_hz, spec.damping_ratio) == pytest.approx((F0_HZ, 0.003))
     library = backbone(model, AMPLITUDES_M, method="multi", harmonics=5)
     reference = phase_resonance_backbone(
         JointSpec(F0_HZ, 0.003, (force,)), AMPLITUDES_M, BalanceSettings(samples_per_period=1024)
