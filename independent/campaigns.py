@@ -14,7 +14,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from identification.measurements.backbone import Backbone, BackboneSet
-from independent.forces import JointSpec
+from independent.forces import (
+    Clearance,
+    Iwan,
+    JointSpec,
+    PowerLawDamping,
+    PreloadedContact,
+)
 from independent.phase_resonance import (
     DEFAULT_BALANCE,
     BalanceSettings,
@@ -23,6 +29,7 @@ from independent.phase_resonance import (
 
 __all__ = [
     "DEFAULT_AMPLITUDES_MM",
+    "OUT_OF_CATALOGUE_JOINTS",
     "HoldNoise",
     "JointSpec",
     "PopulationScatter",
@@ -34,6 +41,29 @@ DEFAULT_AMPLITUDES_MM: tuple[float, ...] = tuple(np.geomspace(0.05, 2.0, 10).tol
 
 #: What each hold lasts (s): a point's time stamp is the centre of its hold.
 HOLD_S = 2.5
+
+
+#: The lab's natural frequency at rest (Hz) and viscous damping ratio of the joints below.
+_F0_HZ, _ZETA = 101.0, 0.003
+_K0 = (2 * np.pi * _F0_HZ) ** 2
+
+
+def _at_rest(stiffness_at_rest: float, *terms) -> JointSpec:
+    """A joint whose stiffness at rest, its terms' included, is the 101 Hz one."""
+    return JointSpec(np.sqrt(_K0 - stiffness_at_rest) / (2 * np.pi), _ZETA, terms)
+
+
+#: Joints no catalogue effect is, at the sizes of the project's lab scenarios (an Iwan joint
+#: of 10 % of the stiffness at rest slipping wholly at 3 mm; a ±0.3 mm clearance closing on
+#: 15 % of it; a contact of 20 % of it lifting off at 0.3 mm; damping ∝ |v|^1.5), each on a
+#: linear spring that keeps the frequency at rest at 101 Hz, ζ = 0.3 %. Their scatter in a
+#: campaign is :attr:`PopulationScatter.sizes` on :attr:`~independent.forces.Force.size_fields`.
+OUT_OF_CATALOGUE_JOINTS: dict[str, JointSpec] = {
+    "iwan": _at_rest(0.1 * _K0, Iwan(0.1 * _K0, 0.1 * _K0 * 1e-3, chi=-0.5, n_sliders=12)),
+    "clearance": _at_rest(0.0, Clearance(3e-4, 0.15 * _K0)),
+    "contact": _at_rest(0.2 * _K0, PreloadedContact(0.2 * _K0, 0.2 * _K0 * 3e-4)),
+    "power-law-damping": _at_rest(0.0, PowerLawDamping(6.2, 1.5)),
+}
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from independent.campaigns import HoldNoise, phase_resonance_campaign
+from independent.campaigns import OUT_OF_CATALOGUE_JOINTS, HoldNoise, phase_resonance_campaign
 from independent.forces import (
     Clearance,
     CoulombFriction,
@@ -325,3 +325,16 @@ def test_the_library_harmonic_balance_matches_the_independent_one(effect):
     np.testing.assert_allclose(
         library.harmonics_cos_m[:, 0], reference.mean_offset_m, atol=h_tol * AMPLITUDES_M.max()
     )
+
+
+@pytest.mark.parametrize("name", sorted(OUT_OF_CATALOGUE_JOINTS))
+def test_out_of_catalogue_campaigns_start_at_the_lab_frequency(name):
+    """Each out-of-catalogue joint rings at 101 Hz at small amplitude (its stiffness at rest is
+    taken off the linear spring) and has a phase-resonant state at every level."""
+    joint = OUT_OF_CATALOGUE_JOINTS[name]
+    backbone = phase_resonance_backbone(joint, [1e-6, 2e-3])
+    assert backbone.converged.all()
+    assert backbone.frequency_hz[0] == pytest.approx(101.0, rel=1e-6)
+    shifted = abs(backbone.frequency_hz[1] / 101.0 - 1) > 1e-3
+    damped = abs(backbone.damping_ratio[1] / 0.003 - 1) > 0.1
+    assert shifted or damped  # the joint shows at 2 mm
