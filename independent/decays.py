@@ -8,14 +8,16 @@ of :mod:`independent.forces`, and the equations are integrated by
 
 One mode: :func:`free_decay`, :func:`forced_steady_state`, and the field's Hilbert backbone of
 a decay (:func:`hilbert_backbone`). Several modes (:class:`ModalSystem`,
-:func:`modal_free_decay`): mass-normalised modal oscillators coupled through joint forces on a
-physical joint coordinate and through a polynomial modal potential, seen by sensors through
-their mode shapes; :func:`modal_backbones` gives each mode's decay backbone from its true modal
+:func:`modal_free_decay`, :func:`modal_forced_steady_state`): mass-normalised modal oscillators
+coupled through joint forces on a physical joint coordinate and through a polynomial modal
+potential, driven by the base through participation factors, seen by sensors through their
+mode shapes; :func:`modal_backbones` gives each mode's decay backbone from its true modal
 coordinate, the reference a modal filter's estimate is compared with.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -29,13 +31,14 @@ from independent.forces import Force as JointForce
 
 __all__ = [
     "DecayBackbone",
-    "ModalDecay",
+    "ModalResponse",
     "ModalSystem",
     "PotentialTerm",
     "forced_steady_state",
     "free_decay",
     "hilbert_backbone",
     "modal_backbones",
+    "modal_forced_steady_state",
     "modal_free_decay",
     "rounded_time_stamps",
 ]
@@ -219,8 +222,8 @@ class ModalSystem:
 
 
 @dataclass(frozen=True)
-class ModalDecay:
-    """A sampled ring-down of a :class:`ModalSystem`.
+class ModalResponse:
+    """A sampled response of a :class:`ModalSystem` (a ring-down or a forced steady state).
 
     Attributes
     ----------
@@ -269,6 +272,101 @@ def rounded_time_stamps(time_s: ArrayLike, significant_digits: int = 7) -> np.nd
     return np.array([float(f"{t:.{significant_digits - 1}e}") for t in np.asarray(time_s)])
 
 
+class _ModalEquations:
+    """The first-order equations of a :class:`ModalSystem`, state ``[q, q̇, slider forces…]``,
+    optionally base-driven: mode ``i`` feels ``−Γ_i a_base(t)``."""
+
+    def __init__(
+        self,
+        system: ModalSystem,
+        base_acceleration: Callable[[float], float] | None = None,
+        participation: Sequence[float] | None = None,
+    ) -> None:
+        self.system, self.n = system, len(system.frequencies_hz)
+        w = system.omega_rad_s
+        self.stiffness, self.damping = w**2, 2 * np.asarray(system.damping_ratios) * w
+        self.phi = np.asarray(system.joint_shape, dtype=float)
+        self.hysteretic = [t for t in system.joint_terms if t.hysteretic]
+        self.memoryless = [t for t in system.joint_terms if not t.hysteretic]
+        self.slider_stiffness = [t.sliders()[0].ravel() for t in self.hysteretic]
+        self.bounds = np.cumsum([2 * self.n, *[k.size for k in self.slider_stiffness]])
+        self.base = base_acceleration
+        gamma = np.ones(self.n) if participation is None else np.asarray(participation, float)
+        self.participation = gamma
+
+    def sliders(self, y: np.ndarray) -> list[np.ndarray]:
+        """Each hysteretic term's element forces in state ``y`` (elements first)."""
+        return [y[a:b] for a, b in itertools.pairwise(self.bounds)]
+
+    def accelerations(self, t, q, qdot, sliders) -> np.ndarray:
+        """Modal accelerations (modes first); ``sliders`` with the elements on the last axis."""
+        column = (slice(None),) + (None,) * (q.ndim - 1)
+        acc = -self.stiffness[column] * q - self.damping[column] * qdot
+        if self.system.joint_terms:
+            u, udot = self.phi @ q, self.phi @ qdot
+            joint = 0.0
+            for term in self.memoryless:
+                joint = joint + term.force(u, udot)
+            for term, state in zip(self.hysteretic, sliders, strict=True):
+                joint = joint + term.from_state(state)
+            acc -= self.phi[column] * joint
+        for coupling in self.system.couplings:
+            acc -= coupling.forces(q)
+        if self.base is not None:
+            base = np.array([self.base(ti) for ti in np.atleast_1d(t)]).reshape(np.shape(t))
+            acc -= self.participation[column] * base
+        return acc
+
+    def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
+        n = self.n
+        q, qdot = y[:n], y[n : 2 * n]
+        if not self.hysteretic:
+            return np.concatenate([qdot, self.accelerations(t, q, qdot, ())])
+        sliders = self.sliders(y)
+        udot = np.asarray(self.phi @ qdot)
+        rates = [t.rate(s, udot) for t, s in zip(self.hysteretic, sliders, strict=True)]
+        return np.concatenate([qdot, self.accelerations(t, q, qdot, sliders), *rates])
+
+    def integrate(
+        self, t_span: tuple[float, float], y0: np.ndarray, t_eval, rtol: float, scale_m: float
+    ):
+        """DOP853 from ``y0``; absolute tolerances ``1e-6·rtol`` of ``scale_m`` in each unit."""
+        w_max = self.system.omega_rad_s.max()
+        atol = (
+            1e-6
+            * rtol
+            * scale_m
+            * np.concatenate([np.ones(self.n), np.full(self.n, w_max), *self.slider_stiffness])
+        )
+        solution = solve_ivp(
+            self.rhs, t_span, y0, method="DOP853", t_eval=t_eval, rtol=rtol, atol=atol
+        )
+        if not solution.success:
+            raise RuntimeError(f"modal response did not integrate: {solution.message}")
+        return solution
+
+    def record(
+        self, time_s: np.ndarray, y: np.ndarray, shapes: np.ndarray, time_digits: int | None
+    ) -> ModalResponse:
+        """The sampled states ``y`` (``(n_states, n_t)``) as a record."""
+        n = self.n
+        q, qdot = y[:n], y[n : 2 * n]
+        qddot = self.accelerations(time_s, q, qdot, [s.T for s in self.sliders(y)])
+        return ModalResponse(
+            time_s=time_s if time_digits is None else rounded_time_stamps(time_s, time_digits),
+            modal_displacement=q,
+            modal_velocity=qdot,
+            modal_acceleration=qddot,
+            displacement_m=shapes @ q,
+            velocity_m_s=shapes @ qdot,
+            acceleration_m_s2=shapes @ qddot,
+        )
+
+
+def _sensor_shapes(sensor_shapes: ArrayLike | None, n: int) -> np.ndarray:
+    return np.eye(n) if sensor_shapes is None else np.atleast_2d(np.asarray(sensor_shapes, float))
+
+
 def modal_free_decay(
     system: ModalSystem,
     q0: Sequence[float],
@@ -279,7 +377,7 @@ def modal_free_decay(
     duration_s: float = 1.0,
     time_digits: int | None = None,
     rtol: float = 1e-10,
-) -> ModalDecay:
+) -> ModalResponse:
     """Ring-down of ``system`` from modal displacements ``q0`` and velocities ``qdot0``.
 
     Parameters
@@ -296,71 +394,54 @@ def modal_free_decay(
     time_digits
         Significant digits of the written time stamps (e.g. 7), or None for exact times.
     rtol
-        DOP853's relative tolerance (absolute: ``1e-6·rtol`` of the largest initial value).
+        DOP853's relative tolerance (absolute: ``1e-6·rtol`` of the largest initial
+        displacement, in each state's unit).
 
     Returns
     -------
-    ModalDecay
-        Hysteretic joint terms start unstressed at the initial joint displacement.
+    ModalResponse
+        Hysteretic joint terms start unstressed.
     """
-    n = len(system.frequencies_hz)
+    equations = _ModalEquations(system)
+    n = equations.n
     q0 = np.asarray(q0, dtype=float)
     qdot0 = np.zeros(n) if qdot0 is None else np.asarray(qdot0, dtype=float)
-    shapes = np.eye(n) if sensor_shapes is None else np.atleast_2d(np.asarray(sensor_shapes, float))
-    w = system.omega_rad_s
-    stiffness, damping = w**2, 2 * np.asarray(system.damping_ratios) * w
-    phi = np.asarray(system.joint_shape, dtype=float)
-    hysteretic = [t for t in system.joint_terms if t.hysteretic]
-    memoryless = [t for t in system.joint_terms if not t.hysteretic]
-    sizes = [t.sliders()[0].size for t in hysteretic]
-    bounds = np.cumsum([2 * n, *sizes])
-
-    def accelerations(q, qdot, sliders):
-        """Modal accelerations (modes first); ``sliders`` with the elements on the last axis."""
-        column = (slice(None),) + (None,) * (q.ndim - 1)
-        acc = -stiffness[column] * q - damping[column] * qdot
-        if system.joint_terms:
-            u, udot = phi @ q, phi @ qdot
-            joint = 0.0
-            for term in memoryless:
-                joint = joint + term.force(u, udot)
-            for term, state in zip(hysteretic, sliders, strict=True):
-                joint = joint + term.from_state(state)
-            acc -= phi[column] * joint
-        for coupling in system.couplings:
-            acc -= coupling.forces(q)
-        return acc
-
-    def rhs(_, y):
-        q, qdot = y[:n], y[n : 2 * n]
-        if not hysteretic:
-            return np.concatenate([qdot, accelerations(q, qdot, ())])
-        sliders = [y[a:b] for a, b in itertools.pairwise(bounds)]
-        udot = np.asarray(phi @ qdot)
-        rates = [t.rate(s, udot) for t, s in zip(hysteretic, sliders, strict=True)]
-        return np.concatenate([qdot, accelerations(q, qdot, sliders), *rates])
-
-    start_sliders = [np.zeros(size) for size in sizes]
-    scale = max(np.max(np.abs(q0)), np.max(np.abs(qdot0)) / w.max())
+    scale = max(np.max(np.abs(q0)), np.max(np.abs(qdot0)) / system.omega_rad_s.max())
     t = np.arange(round(duration_s * fs_hz)) / fs_hz
-    solution = solve_ivp(
-        rhs, (0.0, t[-1]), np.concatenate([q0, qdot0, *start_sliders]), method="DOP853",
-        t_eval=t, rtol=rtol, atol=1e-6 * rtol * scale,
-    )  # fmt: skip
-    if not solution.success:
-        raise RuntimeError(f"modal decay did not integrate: {solution.message}")
-    q, qdot = solution.y[:n], solution.y[n : 2 * n]
-    sliders = [solution.y[a:b] for a, b in itertools.pairwise(bounds)]
-    qddot = accelerations(q, qdot, [s.T for s in sliders])
-    return ModalDecay(
-        time_s=t if time_digits is None else rounded_time_stamps(t, time_digits),
-        modal_displacement=q,
-        modal_velocity=qdot,
-        modal_acceleration=qddot,
-        displacement_m=shapes @ q,
-        velocity_m_s=shapes @ qdot,
-        acceleration_m_s2=shapes @ qddot,
-    )
+    y0 = np.concatenate([q0, qdot0, np.zeros(equations.bounds[-1] - 2 * n)])
+    solution = equations.integrate((0.0, t[-1]), y0, t, rtol, scale)
+    return equations.record(t, solution.y, _sensor_shapes(sensor_shapes, n), time_digits)
+
+
+def modal_forced_steady_state(
+    system: ModalSystem,
+    base_acceleration: Callable[[float], float],
+    period_s: float,
+    participation: Sequence[float],
+    *,
+    sensor_shapes: ArrayLike | None = None,
+    fs_hz: float = 10_000.0,
+    settle_periods: int = 400,
+    record_periods: int = 50,
+    rtol: float = 1e-10,
+) -> ModalResponse:
+    """Steady response of ``system`` driven by the base, mode ``i`` by ``−Γ_i a_base(t)``.
+
+    Starts at rest; after ``settle_periods`` periods the last ``record_periods`` are sampled at
+    ``fs_hz`` (time restarts at 0 there). The caller makes sure the transient has died out
+    (light damping needs many periods) and that ``a_base`` has period ``period_s``.
+    """
+    equations = _ModalEquations(system, base_acceleration, participation)
+    n = equations.n
+    peak = max(abs(base_acceleration(t)) for t in np.linspace(0, period_s, 64))
+    scale = peak * np.max(np.abs(equations.participation)) / system.omega_rad_s.max() ** 2
+    t_settle = settle_periods * period_s
+    y0 = np.zeros(equations.bounds[-1])
+    first = equations.integrate((0.0, t_settle), y0, None, rtol, scale)
+    t = t_settle + np.arange(round(record_periods * period_s * fs_hz)) / fs_hz
+    second = equations.integrate((t_settle, t[-1]), first.y[:, -1], t, rtol, scale)
+    record = equations.record(t, second.y, _sensor_shapes(sensor_shapes, n), None)
+    return dataclasses.replace(record, time_s=t - t_settle)
 
 
 @dataclass(frozen=True)
@@ -375,7 +456,7 @@ class DecayBackbone:
 
 
 def modal_backbones(
-    decay: ModalDecay, bands_hz: Sequence[tuple[float, float]]
+    decay: ModalResponse, bands_hz: Sequence[tuple[float, float]]
 ) -> list[DecayBackbone]:
     """Each mode's decay backbone from its true modal coordinate: the analytic signal of the
     mode's band (``bands_hz[i]`` for mode ``i``; 4th-order Butterworth, zero phase), its

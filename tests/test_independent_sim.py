@@ -1,12 +1,14 @@
 """The independent ring-downs against closed forms: tests built on them stand on firm ground."""
 
 import numpy as np
+import pytest
 from independent_sim import forced_steady_state, free_decay
 
 from independent.decays import (
     ModalSystem,
     PotentialTerm,
     modal_backbones,
+    modal_forced_steady_state,
     modal_free_decay,
     rounded_time_stamps,
 )
@@ -114,6 +116,7 @@ def test_time_stamps_are_written_with_seven_significant_digits():
     assert np.max(np.abs(decay.time_s - np.arange(30) / 3000.0)) <= 5e-7 * decay.time_s.max()
 
 
+@pytest.mark.slow
 def test_modal_backbones_of_linear_modes_are_their_frequency_and_damping():
     system = ModalSystem((100.0, 230.0), (0.01, 0.005))
     decay = modal_free_decay(
@@ -130,6 +133,7 @@ def test_modal_backbones_of_linear_modes_are_their_frequency_and_damping():
         np.testing.assert_allclose(backbone.damping_ratio[middle], zeta, rtol=0.02)
 
 
+@pytest.mark.slow
 def test_a_jenkins_joint_in_a_ring_down_dissipates_masings_energy_per_half_cycle():
     """One undamped mode with a Jenkins element on it. Between turning points x_i, x_{i+1} the
     element reverses elastically over 2 F_s/k_t and slips the rest, so the mode loses
@@ -171,3 +175,19 @@ def test_a_one_sensor_decay_of_two_modes_near_1_to_2_reads_back_as_written(tmp_p
     np.testing.assert_allclose(
         decay.displacement_m[0], decay.modal_displacement[0] + 0.6 * decay.modal_displacement[1]
     )
+
+
+@pytest.mark.slow
+def test_two_base_driven_modes_respond_as_their_frfs_say():
+    """q_i = −Γ_i A / (ω_i² − ω² + 2iζ_i ω_i ω) under a_base = A cos ωt, seen by a sensor."""
+    system = ModalSystem((100.0, 230.0), (0.05, 0.05))
+    gamma, omega, shape = np.array([1.0, 0.5]), 2 * np.pi * 150.0, np.array([[1.0, -0.7]])
+    steady = modal_forced_steady_state(
+        system, lambda t: 2.0 * np.cos(omega * t), 1 / 150.0, gamma, sensor_shapes=shape,
+        settle_periods=90, record_periods=4,
+    )  # fmt: skip
+    w, z = system.omega_rad_s, np.array([0.05, 0.05])
+    modal = -gamma * 2.0 / (w**2 - omega**2 + 2j * z * w * omega)
+    expected = np.real((shape @ modal)[0] * np.exp(1j * omega * (steady.time_s + 90 / 150.0)))
+    scale = np.abs(shape @ modal)[0]
+    assert np.max(np.abs(steady.displacement_m[0] - expected)) < 1e-6 * scale
