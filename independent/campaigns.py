@@ -102,7 +102,8 @@ class HoldNoise:
         Relative damping-ratio standard error; ``damping·(1 + a_lo/a)·|D|``.
     harmonic
         Standard error of each real part of a harmonic, as a fraction of the fundamental;
-        ``harmonic·(1 + a_lo/a)`` (carried as the points' ``harmonic_standard_error``).
+        ``harmonic·(1 + a_lo/a)`` (carried as the points' ``harmonic_standard_error``); the
+        mean offset (a displacement sensor's) has the same standard error times ``a``.
     """
 
     frequency_hz: float = 0.003
@@ -132,9 +133,9 @@ def phase_resonance_campaign(
     seed
         Seed of every random draw. Per assembly, in order: its joint
         (:meth:`JointSpec.drawn`: stiffness, damping, then each term's sizes), the
-        amplitude jitter of each branch, then its noise (a ``(6, n_points)`` standard normal
-        draw: frequency, damping ratio, then the real and imaginary parts of harmonics 2
-        and 3).
+        amplitude jitter of each branch, then its noise (a ``(7, n_points)`` standard normal
+        draw: frequency, damping ratio, the real and imaginary parts of harmonics 2 and 3,
+        the mean offset).
     amplitudes_mm
         Nominal levels (mm); each assembly holds them jittered by
         ``scatter.amplitude_jitter``, in increasing order (then decreasing: ``up_down``).
@@ -173,7 +174,7 @@ def phase_resonance_campaign(
             for _ in range(2 if up_down else 1)
         ]
         amplitudes.append(np.concatenate([branches[0], *[b[::-1] for b in branches[1:]]]))
-        draws.append(rng.standard_normal((6, amplitudes[-1].size)))
+        draws.append(rng.standard_normal((7, amplitudes[-1].size)))
     truth = phase_resonance_backbone(joints, np.array(amplitudes), settings)
     if not truth.converged.all():
         i = int(np.argmax(~truth.converged.all(axis=1)))
@@ -183,7 +184,7 @@ def phase_resonance_campaign(
         ratio = low / a
         damping = truth.damping_ratio[i]
         h_noise = noise.harmonic * (1 + ratio)
-        measured_harmonics = draw[2::2] + 1j * draw[3::2]  # orders 2 and 3
+        measured_harmonics = draw[2:6:2] + 1j * draw[3:6:2]  # orders 2 and 3
         curves.append(
             Backbone(
                 a,
@@ -193,7 +194,7 @@ def phase_resonance_campaign(
                 source="independent.phase_resonance",
                 harmonics=truth.harmonics[i, :, :2] + h_noise[:, None] * measured_harmonics.T,
                 harmonic_standard_error=np.repeat(h_noise[:, None], 2, axis=1),
-                mean_offset_m=truth.mean_offset_m[i],
+                mean_offset_m=truth.mean_offset_m[i] + h_noise * a * draw[6],
                 time_s=HOLD_S * (np.arange(a.size) + 0.5),
             )
         )

@@ -274,8 +274,9 @@ def test_campaign_noise_is_the_documented_hold_fit_noise():
         se = n.harmonic_standard_error
         np.testing.assert_allclose(se[:, 0], 3e-4 * (1 + low / a))
         z_h.append(((n.harmonics - c.harmonics) / se).view(float))
+        z_h.append((n.mean_offset_m - c.mean_offset_m) / (se[:, 0] * a))
     for z in (z_f, z_d, z_h):
-        z = np.concatenate(z).ravel()
+        z = np.concatenate([np.ravel(part) for part in z])
         assert abs(z.mean()) < 4 / np.sqrt(z.size) and 0.7 < z.std() < 1.3
 
 
