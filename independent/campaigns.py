@@ -120,6 +120,8 @@ def phase_resonance_campaign(
     scatter: PopulationScatter = PopulationScatter(),
     noise: HoldNoise = HoldNoise(),
     up_down: bool = False,
+    shaker_distortion: tuple[float, float] = (0.0, 0.0),
+    ripple_leak: float = 0.0,
     settings: BalanceSettings = DEFAULT_BALANCE,
 ) -> BackboneSet:
     """A campaign of ``n_curves`` assemblies of ``joint``, as PLL hold fits measure it.
@@ -133,9 +135,11 @@ def phase_resonance_campaign(
     seed
         Seed of every random draw. Per assembly, in order: its joint
         (:meth:`JointSpec.drawn`: stiffness, damping, then each term's sizes), the
-        amplitude jitter of each branch, then its noise (a ``(7, n_points)`` standard normal
+        amplitude jitter of each branch, its shaker and ripple (8 uniform numbers, drawn
+        whether or not those conditions are on, so that a campaign with them and one without
+        share assemblies and noise), then its noise (a ``(11, n_points)`` standard normal
         draw: frequency, damping ratio, the real and imaginary parts of harmonics 2 and 3,
-        the mean offset).
+        the mean offset, those of the excitation's harmonics 2 and 3).
     amplitudes_mm
         Nominal levels (mm); each assembly holds them jittered by
         ``scatter.amplitude_jitter``, in increasing order (then decreasing: ``up_down``).
@@ -147,6 +151,16 @@ def phase_resonance_campaign(
         Levels stepped up, then down again: a second branch, in decreasing order, with its
         own amplitude jitter and noise (points carry their hold times, so drift in time can
         be told from amplitude dependence).
+    shaker_distortion
+        The largest 2nd and 3rd harmonic of the base acceleration (fractions of its
+        fundamental). Each assembly's shaker has its own, between half and all of it, with
+        random phases, growing with the drive level (the nominal level over the largest) from
+        half to full; the response is driven by it and each point carries the excitation
+        harmonics it measured (with the harmonics' noise).
+    ripple_leak
+        What the controller's frequency ripple leaves in the measured response harmonics
+        after the hold fit (fraction of the fundamental): a bias of random size (up to twice
+        this) and phase per assembly and order, the same at every level.
     settings
         The harmonic balance's settings.
 
@@ -164,7 +178,7 @@ def phase_resonance_campaign(
     rng = np.random.default_rng(seed)
     nominal_m = 1e-3 * np.asarray(amplitudes_mm, dtype=float)
     low = nominal_m.min()
-    joints, amplitudes, draws = [], [], []
+    joints, amplitudes, draws, shakers, leaks = [], [], [], [], []
     for _ in range(n_curves):
         joints.append(joint.drawn(rng, scatter.stiffness, scatter.damping, scatter.sizes))
         branches = [
@@ -174,17 +188,30 @@ def phase_resonance_campaign(
             for _ in range(2 if up_down else 1)
         ]
         amplitudes.append(np.concatenate([branches[0], *[b[::-1] for b in branches[1:]]]))
-        draws.append(rng.standard_normal((7, amplitudes[-1].size)))
-    truth = phase_resonance_backbone(joints, np.array(amplitudes), settings)
+        shaker = np.asarray(shaker_distortion) * rng.uniform(0.5, 1.0, 2)
+        shakers.append(shaker * np.exp(2j * np.pi * rng.uniform(size=2)))
+        leaks.append(ripple_leak * rng.uniform(0, 2, 2) * np.exp(2j * np.pi * rng.uniform(size=2)))
+        draws.append(rng.standard_normal((11, amplitudes[-1].size)))
+    drive = np.concatenate([nominal_m, nominal_m[::-1]][: 2 if up_down else 1]) / nominal_m.max()
+    forcing = (0.5 + 0.5 * drive)[None, :, None] * np.array(shakers)[:, None, :]
+    truth = phase_resonance_backbone(
+        joints,
+        np.array(amplitudes),
+        settings,
+        excitation_harmonics=forcing if np.any(shaker_distortion) else None,
+    )
     if not truth.converged.all():
         i = int(np.argmax(~truth.converged.all(axis=1)))
         raise RuntimeError(f"no phase-resonant state for assembly {i + 1} of {joint}")
     curves = []
-    for i, (a, draw) in enumerate(zip(amplitudes, draws, strict=True)):
+    for i, (a, draw, leak) in enumerate(zip(amplitudes, draws, leaks, strict=True)):
         ratio = low / a
         damping = truth.damping_ratio[i]
         h_noise = noise.harmonic * (1 + ratio)
-        measured_harmonics = draw[2:6:2] + 1j * draw[3:6:2]  # orders 2 and 3
+        measured_harmonics = leak + h_noise[:, None] * (draw[2:6:2] + 1j * draw[3:6:2]).T
+        excitation = None
+        if np.any(shaker_distortion):
+            excitation = forcing[i] + h_noise[:, None] * (draw[7:11:2] + 1j * draw[8:11:2]).T
         curves.append(
             Backbone(
                 a,
@@ -192,8 +219,9 @@ def phase_resonance_campaign(
                 damping + noise.damping * (1 + ratio) * np.abs(damping) * draw[1],
                 label=f"assembly{i + 1}",
                 source="independent.phase_resonance",
-                harmonics=truth.harmonics[i, :, :2] + h_noise[:, None] * measured_harmonics.T,
+                harmonics=truth.harmonics[i, :, :2] + measured_harmonics,
                 harmonic_standard_error=np.repeat(h_noise[:, None], 2, axis=1),
+                excitation_harmonics=excitation,
                 mean_offset_m=truth.mean_offset_m[i] + h_noise * a * draw[6],
                 time_s=HOLD_S * (np.arange(a.size) + 0.5),
             )

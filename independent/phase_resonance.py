@@ -115,7 +115,14 @@ class _Balance:
     """The balance residual of many cases: rows are cases, unknowns
     ``z = [X0/a, ω/ω0, C_2/a, S_2/a, …, C_H/a, S_H/a]``."""
 
-    def __init__(self, joint: JointSpec, a: np.ndarray, harmonics: int, n: int) -> None:
+    def __init__(
+        self,
+        joint: JointSpec,
+        a: np.ndarray,
+        harmonics: int,
+        n: int,
+        excitation: np.ndarray | None = None,
+    ) -> None:
         self.joint, self.a, self.n = joint, a[:, None, None], n
         self.w0 = np.asarray(joint.omega0_rad_s, dtype=float).reshape(-1, 1, 1)
         theta = 2 * np.pi * np.arange(n) / n
@@ -124,6 +131,14 @@ class _Balance:
         self.cos1, self.sin1 = np.cos(theta), np.sin(theta)
         self.cos_h = np.cos(orders[:, None] * theta)
         self.sin_h = np.sin(orders[:, None] * theta)
+        # The base acceleration's orders 2.. as complex amplitudes per unit A in the frame where
+        # its fundamental is A sin θ: its own frame is θ − π/2, so order h turns by (−i)^h.
+        self.excitation = None
+        if excitation is not None:
+            turned = np.zeros((a.size, orders.size), dtype=complex)
+            given = excitation[:, : orders.size]
+            turned[:, : given.shape[1]] = given * (-1j) ** orders[: given.shape[1]]
+            self.excitation = turned[:, None, :]
 
     def __call__(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Residuals ``(rows, k, 2H)`` (over ``ω0² a``) and ``A`` ``(rows, k)`` at unknowns
@@ -142,7 +157,12 @@ class _Balance:
         residual[..., 1] = spectrum[..., 1].real / scale - w2
         residual[..., 2::2] = spectrum[..., h].real / scale[..., None] - h**2 * w2[..., None] * c
         residual[..., 3::2] = -spectrum[..., h].imag / scale[..., None] - h**2 * w2[..., None] * s
-        return residual, spectrum[..., 1].imag  # A = −F_s1 = +Im of the projection
+        base = spectrum[..., 1].imag  # A = −F_s1 = +Im of the projection
+        if self.excitation is not None:  # the forcing's harmonics, A times their fractions
+            forcing = base[..., None] * self.excitation / scale[..., None]
+            residual[..., 2::2] += forcing.real
+            residual[..., 3::2] -= forcing.imag
+        return residual, base
 
     def start(self, iterations: int = 12) -> np.ndarray:
         """The fundamental-only balance ``ω² a = F_c1(a cos θ, −aω sin θ)``, by fixed point."""
@@ -225,6 +245,7 @@ def phase_resonance_backbone(
     joints: JointSpec | Sequence[JointSpec],
     amplitudes_m: ArrayLike,
     settings: BalanceSettings = DEFAULT_BALANCE,
+    excitation_harmonics: ArrayLike | None = None,
 ) -> PhaseResonanceBackbone:
     """Phase-resonance backbones of ``joints`` at the given fundamental amplitudes.
 
@@ -237,6 +258,12 @@ def phase_resonance_backbone(
         every joint, or ``(n_joints, n_amp)``.
     settings
         Harmonics, samples and tolerance of the balance.
+    excitation_harmonics
+        A distorted base acceleration: its orders ``2, 3, …`` as complex fractions of its
+        fundamental, in the frame where that fundamental is real (a test's measured
+        ``excitation_harmonics``), ``(n_orders,)`` shared or ``(n_joints, n_amp, n_orders)``.
+        Its fundamental is still ``A sin ωt`` with ``A`` the unknown phase resonance fixes;
+        the harmonics scale with it. None: a pure sine.
 
     Returns
     -------
@@ -252,7 +279,11 @@ def phase_resonance_backbone(
     rows = [j for j in joints for _ in range(a.shape[1])]
     joint = stacked(rows, (-1, 1, 1))
     n = settings.samples(joint.smooth)
-    balance = _Balance(joint, a.reshape(-1), settings.harmonics, n)
+    excitation = None
+    if excitation_harmonics is not None:
+        ratios = np.asarray(excitation_harmonics, dtype=complex)
+        excitation = np.broadcast_to(ratios, (*a.shape, ratios.shape[-1])).reshape(a.size, -1)
+    balance = _Balance(joint, a.reshape(-1), settings.harmonics, n, excitation)
     z, base, converged = _newton(balance, settings)
     z[~converged] = np.nan
     base[~converged] = np.nan

@@ -110,6 +110,22 @@ def test_linear_viscous_joint_resonates_at_omega0_with_damping_zeta():
     assert np.abs(backbone.harmonics).max() < 1e-12
 
 
+def test_a_distorted_base_drives_the_linear_joints_harmonics_through_its_frf():
+    """Base acceleration A sin θ plus orders h of fractions E_h in its own frame: the linear
+    joint's harmonic h is −A E_h (−i)^h / (ω0² − h²ω0² + 2iζω0 hω0) over a, at ω = ω0."""
+    zeta, ratios = 0.004, np.array([0.04 * np.exp(0.5j), 0.03 * np.exp(-1.0j)])
+    backbone = phase_resonance_backbone(
+        JointSpec(F0_HZ, zeta), AMPLITUDES_M, excitation_harmonics=ratios
+    )
+    np.testing.assert_allclose(backbone.frequency_hz, F0_HZ, rtol=1e-12)
+    np.testing.assert_allclose(backbone.damping_ratio, zeta, rtol=1e-9)
+    h = np.array([2, 3])
+    big_a = 2 * zeta * W0**2 * AMPLITUDES_M[:, None]
+    frf = W0**2 - (h * W0) ** 2 + 2j * zeta * W0 * h * W0
+    expected = -big_a * ratios * (-1j) ** h / frf / AMPLITUDES_M[:, None]
+    np.testing.assert_allclose(backbone.harmonics[:, :2], expected, rtol=1e-7)
+
+
 def test_cubic_stiffness_follows_the_duffing_backbone_at_small_amplitude():
     """ω² = ω0² + ¾ k3 a², the third harmonic of the single-term balance and D = ζ ω0/ω, while
     the shift is small (the next terms are of relative order the shift itself)."""
@@ -247,12 +263,12 @@ def test_a_noise_free_campaign_is_the_backbone_of_each_drawn_assembly():
         assert curve.harmonics.shape == (10, 2) and np.all(np.diff(curve.amplitude_m) > 0)
         # Hardening from the linear frequency near F0 (stiffness scatter 0.5 %); viscous
         # damping alone dissipates, in every harmonic: D ω = ζ ω0 (1 + Σ h² |X_h/a|²) with ζ ω0
-        # the drawn assembly's (orders above 3 add < 1e-8 here).
+        # the drawn assembly's (order 5 adds 25 |X5/a|², a few 1e-8 at 2 mm).
         assert abs(curve.frequency_hz[0] / F0_HZ - 1) < 0.02
         assert np.all(np.diff(curve.frequency_hz) > 0)
         power = 1 + 4 * np.abs(curve.harmonics[:, 0]) ** 2 + 9 * np.abs(curve.harmonics[:, 1]) ** 2
         d_omega = curve.damping_ratio * 2 * np.pi * curve.frequency_hz / power
-        assert np.ptp(d_omega) < 1e-8 * d_omega.mean()
+        assert np.ptp(d_omega) < 1e-7 * d_omega.mean()
         assert abs(d_omega.mean() / (0.003 * W0) - 1) < 0.3  # ζ drawn with 5 % spread
 
 
@@ -301,8 +317,9 @@ LIBRARY_CASES = {
 }
 
 
+@pytest.mark.parametrize("distorted", [False, True])
 @pytest.mark.parametrize("effect", sorted(LIBRARY_CASES))
-def test_the_library_harmonic_balance_matches_the_independent_one(effect):
+def test_the_library_harmonic_balance_matches_the_independent_one(effect, distorted):
     from identification.analytical.harmonic import backbone
     from identification.model import JointModel
 
@@ -312,10 +329,15 @@ def test_the_library_harmonic_balance_matches_the_independent_one(effect):
     spec = catalogue_joint(terms)
     assert spec.terms == (force,)
     assert (spec.natural_frequency_hz, spec.damping_ratio) == pytest.approx((F0_HZ, 0.003))
-    library = backbone(model, AMPLITUDES_M, method="multi", harmonics=5)
-    reference = phase_resonance_backbone(
-        JointSpec(F0_HZ, 0.003, (force,)), AMPLITUDES_M, BalanceSettings(samples_per_period=1024)
+    # A shaker's 2nd and 3rd harmonics (measured fractions of the fundamental, own frame).
+    ratios = np.array([0.04 * np.exp(0.5j), 0.03 * np.exp(-1.0j)]) if distorted else None
+    library = backbone(
+        model, AMPLITUDES_M, method="multi", harmonics=5, excitation_harmonics=ratios
     )
+    reference = phase_resonance_backbone(
+        JointSpec(F0_HZ, 0.003, (force,)), AMPLITUDES_M, BalanceSettings(samples_per_period=1024),
+        excitation_harmonics=ratios,
+    )  # fmt: skip
     assert library.converged.all() and reference.converged.all()
     np.testing.assert_allclose(library.frequency_hz, reference.frequency_hz, rtol=f_tol)
     np.testing.assert_allclose(library.damping_ratio, reference.damping_ratio, rtol=d_tol)
@@ -326,6 +348,28 @@ def test_the_library_harmonic_balance_matches_the_independent_one(effect):
     np.testing.assert_allclose(
         library.harmonics_cos_m[:, 0], reference.mean_offset_m, atol=h_tol * AMPLITUDES_M.max()
     )
+
+
+def test_lab_conditions_of_a_campaign_are_the_documented_ones():
+    """Same seed, same assemblies: the ripple's leak is a constant bias per assembly and order
+    of at most twice its size; the shaker's harmonics grow with the drive from half to full
+    of a size between half and all of the distortion."""
+    joint = JointSpec(F0_HZ, 0.003, (CubicStiffness(1.4e10),))
+    quiet = HoldNoise(0.0, 0.0, 0.0)
+    clean = phase_resonance_campaign(joint, 3, 2, noise=quiet)
+    leaky = phase_resonance_campaign(joint, 3, 2, noise=quiet, ripple_leak=2e-5)
+    for c, r in zip(clean, leaky, strict=True):
+        bias = r.harmonics - c.harmonics
+        assert np.ptp(bias.real, axis=0).max() < 1e-15 and np.ptp(bias.imag, axis=0).max() < 1e-15
+        assert np.all(np.abs(bias[0]) <= 4e-5) and np.all(np.abs(bias[0]) > 0)
+        assert r.excitation_harmonics is None
+    distorted = phase_resonance_campaign(joint, 3, 2, noise=quiet, shaker_distortion=(0.04, 0.03))
+    for curve in distorted:
+        size = np.abs(curve.excitation_harmonics)
+        drive = np.geomspace(0.05, 2.0, 10) / 2.0
+        shaker = size / (0.5 + 0.5 * drive)[:, None]
+        assert np.ptp(shaker, axis=0).max() < 1e-12
+        assert np.all((shaker[0] >= [0.02, 0.015]) & (shaker[0] <= [0.04, 0.03]))
 
 
 @pytest.mark.parametrize("name", sorted(OUT_OF_CATALOGUE_JOINTS))
