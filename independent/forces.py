@@ -246,6 +246,10 @@ class Hysteretic(Force):
         ``(..., n_elements)`` (their time axis of length 1 becomes the elements' axis)."""
         raise NotImplementedError
 
+    def scale(self) -> np.ndarray | float:
+        """Factor on the elements' summed force (a catalogue coefficient; 1 for a joint)."""
+        return 1.0
+
     def along(
         self, x: np.ndarray, state: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -254,7 +258,7 @@ class Hysteretic(Force):
         ``state`` is the elements' forces where the path starts (default: unstressed at
         ``x = 0``, loaded straight to the path's first sample). Between samples the path is
         taken as monotonic, where the element's return map is exact. Returns the force
-        ``(..., n_t)`` and the elements' forces at the last sample.
+        ``(..., n_t)`` (times :meth:`scale`) and the elements' forces at the last sample.
         """
         k, f_slip = self.sliders()
         x = np.asarray(x, dtype=float)
@@ -275,7 +279,7 @@ class Hysteretic(Force):
             np.minimum(state, high, out=state)
             np.maximum(state, low, out=state)
             out[j] = state.sum(-1)
-        return np.moveaxis(out, 0, -1), state
+        return self.scale() * np.moveaxis(out, 0, -1), state
 
     def periodic(self, x: np.ndarray, max_periods: int = 8) -> np.ndarray:
         """Force along one period of the periodic path ``x`` once the loop has closed.
@@ -312,9 +316,10 @@ class Hysteretic(Force):
         return np.where(slipping, 0.0, k * v[..., None])
 
     def from_state(self, state: np.ndarray) -> np.ndarray:
-        """Joint force of the elements' forces ``state`` (clipped to the slip forces)."""
+        """Joint force of the elements' forces ``state`` (clipped to the slip forces, times
+        :meth:`scale`)."""
         _, f_slip = self.sliders()
-        return np.clip(state, -f_slip, f_slip).sum(-1)
+        return self.scale() * np.clip(state, -f_slip, f_slip).sum(-1)
 
 
 @dataclass(frozen=True)
@@ -329,7 +334,10 @@ class Microslip(Hysteretic):
 
     def sliders(self):
         one = np.ones(1)
-        return self.coefficient * self.k_t * one, self.coefficient * self.F_s * one
+        return self.k_t * one, self.F_s * one
+
+    def scale(self):
+        return self.coefficient
 
 
 @dataclass(frozen=True)

@@ -171,6 +171,9 @@ def test_a_jenkins_loop_dissipates_masings_energy():
     force = element.periodic(x)
     area = np.sum(force * np.gradient(np.cos(theta)) * a, axis=-1)  # ∮ f dx, x = a cos θ
     np.testing.assert_allclose(area, 4 * f_s * (a[:, 0] - f_s / k_t), rtol=1e-5)
+    # The catalogue's coefficient scales the element's force, whatever its sign.
+    negative = Microslip(-2.0, k_t=k_t, F_s=f_s).periodic(x)
+    np.testing.assert_allclose(negative, -2.0 * force, rtol=0, atol=1e-12 * f_s)
     stuck = element.periodic(0.5 * f_s / k_t * np.cos(theta))
     np.testing.assert_allclose(stuck, 0.5 * f_s * np.cos(theta), rtol=0, atol=1e-12 * f_s)
 
