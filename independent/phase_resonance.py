@@ -192,7 +192,9 @@ def _solve(jacobian: np.ndarray, residual: np.ndarray) -> np.ndarray:
             return -(np.linalg.pinv(jacobian) @ residual[..., None])[..., 0]
 
 
-def _newton(balance: _Balance, settings: BalanceSettings) -> tuple[np.ndarray, np.ndarray, ...]:
+def _newton(
+    balance: _Balance, settings: BalanceSettings
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Unknowns, ``A`` and convergence of every case, all cases together.
 
     Broyden's method from a forward-difference Jacobian: each iteration costs one residual,
