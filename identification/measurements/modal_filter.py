@@ -19,7 +19,11 @@ Shapes:
   mode-shape file: the sensors' cross-spectral matrix (Welch averages of
   Hann-windowed segments) is decomposed at every frequency; its first singular
   value's peaks are the modes' narrow bands and the first singular vector at a
-  peak the mode's shape (frequency-domain decomposition). A peak whose shape is
+  peak the mode's shape (frequency-domain decomposition). Only peaks where one
+  shape dominates (the first singular value :data:`DOMINANCE` times the second
+  or more) and that stand out of their surroundings by as much (prominence)
+  count: over noise the singular values are alike, and a ripple on another
+  mode's skirt does not stand out. A peak whose shape is
   one already taken (MAC above :data:`SAME_SHAPE_MAC`: a harmonic, or the same
   mode at another hold's frequency) is passed over.
 
@@ -48,6 +52,7 @@ from numpy.typing import ArrayLike
 from identification.measurements.series import frozen_array
 
 __all__ = [
+    "DOMINANCE",
     "SAME_SHAPE_MAC",
     "SECOND_MODE_SHARE",
     "ModalFilter",
@@ -62,6 +67,9 @@ __all__ = [
 SECOND_MODE_SHARE = 0.05
 #: Modal assurance criterion above which two estimated shapes are one mode's.
 SAME_SHAPE_MAC = 0.9
+#: Ratio of the first to the second singular value of the cross-spectral matrix at a peak
+#: above which one shape dominates it: a mode's band, not noise.
+DOMINANCE = 10.0
 #: Condition number of the sensors' shape matrix beyond which the modes cannot be told apart.
 _MAX_CONDITION = 1e6
 #: Frequency resolution of the spectra the shapes are estimated from (Hz): fine enough to
@@ -314,10 +322,13 @@ def estimate_shapes(
     density = np.einsum("fst,fut->fsu", z, z.conj()) / z.shape[-1]
     vectors, values, _ = np.linalg.svd(density)
     first = values[:, 0]
-    peaks, _ = find_peaks(np.log(first + first.max() * 1e-30))
+    # A mode's band stands out of its surroundings; a ripple on another's skirt does not.
+    peaks, _ = find_peaks(np.log(first + first.max() * 1e-30), prominence=np.log(DOMINANCE))
     chosen: list[tuple[float, np.ndarray]] = []
     for p in peaks[np.argsort(first[peaks])[::-1]]:
         shape = vectors[p, :, 0]
+        if values.shape[1] > 1 and first[p] < DOMINANCE * values[p, 1]:
+            continue
         if any(mac(shape, other) > SAME_SHAPE_MAC for _, other in chosen):
             continue
         chosen.append((_peak_frequency(freqs[inside], np.log(first), p), shape))
