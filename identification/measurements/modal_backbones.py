@@ -6,7 +6,7 @@ filter of its mode shapes (:mod:`identification.measurements.modal_filter`):
 each mode's coordinate, scaled to its reference sensor (the sensor where its
 shape is largest), is a signal of its own, and every hold is read on it as the
 one-mode path reads the record's response
-(:func:`~identification.measurements.extraction.hold_points`, the same window,
+(:func:`~identification.measurements.extraction.extract_backbone`, the same window,
 fit, conversions and checks):
 
 * the **locked mode** (the mode whose coordinate carries the most energy over
@@ -47,14 +47,15 @@ import warnings
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
 
 from identification.artifacts import atomic_write_text
 from identification.measurements.backbone import Backbone, BackboneSet
-from identification.measurements.extraction import hold_point, hold_points, record_holds
+from identification.measurements.extraction import extract_backbone, hold_point, record_holds
+from identification.measurements.hold_fit import ShortHoldError
 from identification.measurements.modal_filter import (
     SECOND_MODE_SHARE,
     ModalFilter,
@@ -62,7 +63,6 @@ from identification.measurements.modal_filter import (
     second_mode_warning,
 )
 from identification.measurements.modes import Modes
-from identification.measurements.quantities import mean_offsets
 
 __all__ = [
     "PARTICIPATION_ORDERS",
@@ -80,7 +80,7 @@ __all__ = [
 #: Harmonic orders of every mode's participation.
 PARTICIPATION_ORDERS = (1, 2, 3)
 #: Columns of the one-mode table that a mode's row carries only where the mode was locked.
-_LOCKED_ONLY = ("frequency_hz", "damping_ratio", "phase_error_deg")
+_LOCKED_ONLY = ("frequency_hz", "damping_ratio", "phase_error_deg", "mean_offset_mm")
 
 
 @dataclass(frozen=True)
@@ -113,10 +113,8 @@ class ModalCurve:
         The shapes it was read with (their source, alignment error, reference sensors).
     locked_mode
         The mode the PLL held (from 1).
-    backbones
-        ``N`` curves, one per mode, a point per hold: the locked mode's is its
-        backbone; the others' frequencies and damping are those of the hold read
-        on their coordinate, not their own (left out of the table).
+    backbone
+        The locked mode's backbone, a point per hold.
     holds
         Every hold's participation and energy shares.
     reconstruction_error
@@ -128,14 +126,9 @@ class ModalCurve:
     source: str
     modal_filter: ModalFilter
     locked_mode: int
-    backbones: tuple[Backbone, ...]
+    backbone: Backbone
     holds: tuple[ModalHold, ...]
     reconstruction_error: np.ndarray
-
-    @property
-    def backbone(self) -> Backbone:
-        """The locked mode's backbone."""
-        return self.backbones[self.locked_mode - 1]
 
     def largest_other_share(self) -> tuple[int, float]:
         """The mode (from 1) other than the locked one with the largest energy share at any
@@ -206,6 +199,15 @@ def record_modal_filter(record: Any, n_modes: int, mode_shapes: Modes | None = N
     )  # fmt: skip
 
 
+class _Reading(NamedTuple):
+    """What a hold fit says of one mode's coordinate: the fundamental's amplitude (m) and
+    phase error (deg, against the excitation), the harmonics ``2..`` in its own frame."""
+
+    amplitude_m: float
+    phase_error_deg: float
+    harmonics: np.ndarray
+
+
 def modal_curve(
     record: Any,
     modal_filter: ModalFilter,
@@ -218,9 +220,9 @@ def modal_curve(
     Raises
     ------
     ValueError
-        As :func:`~identification.measurements.extraction.hold_points` on the locked
-        mode's coordinate (naming the record and hold), and for a free decay (read
-        per mode by the decay readers).
+        As :func:`~identification.measurements.extraction.extract_backbone` on the
+        locked mode's coordinate (naming the record and hold), and for a free decay
+        (read per mode by the decay readers).
     """
     where = record.path or record.name
     if record.test == "free-decay":
@@ -228,50 +230,42 @@ def modal_curve(
     signals, quantity = _sensor_signals(record)
     scaled = modal_filter.scaled_coordinates(signals)
     holds = record_holds(record)
-    inside = np.zeros(record.time_s.size, dtype=bool)
-    for hold in holds:
-        inside |= (record.time_s >= hold.start_s) & (record.time_s <= hold.end_s)
-    locked = int(np.argmax(np.mean(scaled[inside] ** 2, axis=0)))
+    t = record.time_s
+    spans = [slice(np.searchsorted(t, h.start_s, "left"), np.searchsorted(t, h.end_s, "right"))
+             for h in holds]  # fmt: skip
+    energy = sum(np.sum(scaled[rows] ** 2, axis=0) for rows in spans)
+    locked = int(np.argmax(energy))
+    backbone = extract_backbone(
+        _ModeSignal(record, scaled[:, locked], quantity), n_periods, harmonics, strict
+    )
+    own = np.zeros((len(backbone), 0)) if backbone.harmonics is None else backbone.harmonics
+    readings = [[_Reading(a, e, h) for a, e, h in zip(backbone.amplitude_m,
+                 backbone.phase_error_deg, own, strict=True)]]  # fmt: skip
     gain = record.forcing_gain if record.excitation_kind == "force" else 1.0
-    views = [_ModeSignal(record, scaled[:, m], quantity) for m in range(modal_filter.n_modes)]
-    points, holds = hold_points(views[locked], n_periods, harmonics, strict, forcing_gain=gain)
     options = dict(
-        excitation_kind=record.excitation_kind, response_quantity=quantity, relative=True,
-        forcing_gain=gain, test=record.test,
+        harmonics=harmonics, excitation_kind=record.excitation_kind, response_quantity=quantity,
+        relative=True, forcing_gain=gain, test=record.test,
     )  # fmt: skip
-    per_mode = []
-    for m in range(modal_filter.n_modes):
-        if m == locked:
-            per_mode.append(points)
-            continue
-        mode_points = []
-        for hold, own in zip(holds, points, strict=True):
-            t = record.time_s
-            rows = slice(
-                np.searchsorted(t, hold.start_s, "left"), np.searchsorted(t, hold.end_s, "right")
+    others = [m for m in range(modal_filter.n_modes) if m != locked]
+    for m in others:
+        mode_readings = []
+        for rows in spans:
+            args = (t[rows], record.excitation[rows], scaled[rows, m], record.frequency_hz[rows])
+            try:
+                point = hold_point(*args, n_periods=n_periods, **options)
+            except ShortHoldError as exc:  # the locked mode's reading said so, or refused
+                point = hold_point(*args, n_periods=int(exc.periods), **options)
+            mode_readings.append(
+                _Reading(point.amplitude_m, point.phase_error_deg, point.harmonics)
             )
-            mode_points.append(
-                hold_point(
-                    record.time_s[rows], record.excitation[rows], scaled[rows, m],
-                    record.frequency_hz[rows], n_periods=own.periods, harmonics=harmonics,
-                    **options,
-                )
-            )  # fmt: skip
-        per_mode.append(mode_points)
+        readings.append(mode_readings)
+    order = np.argsort([locked, *others])
     omega_modes = 2 * np.pi * modal_filter.frequencies_hz
     modal_holds = tuple(
-        _modal_hold([mode[j] for mode in per_mode], locked, omega_modes) for j in range(len(holds))
+        _modal_hold([readings[i][j] for i in order], locked, omega_modes, backbone.frequency_hz[j])
+        for j in range(len(holds))
     )
-    levels = [h.level for h in holds]
-    backbones = tuple(
-        _backbone(record, mode_points, levels, harmonics > 1) for mode_points in per_mode
-    )
-    curve = ModalCurve(
-        label=record.name, source=str(where), modal_filter=modal_filter, locked_mode=locked + 1,
-        backbones=backbones, holds=modal_holds,
-        reconstruction_error=modal_filter.reconstruction_error(signals),
-    )  # fmt: skip
-    fundamental = np.array([[abs(p[0]) ** 2 for p in h.participation] for h in modal_holds])
+    fundamental = np.array([np.abs(h.participation[:, 0]) for h in modal_holds])
     moved = np.flatnonzero(np.argmax(fundamental, axis=1) != locked)
     if moved.size:
         warnings.warn(
@@ -279,50 +273,34 @@ def modal_curve(
             f"larger than that of mode {locked + 1}, read as the locked mode of every hold",
             stacklevel=2,
         )
-    return curve
+    return ModalCurve(
+        label=record.name, source=str(where), modal_filter=modal_filter, locked_mode=locked + 1,
+        backbone=backbone, holds=modal_holds,
+        reconstruction_error=modal_filter.reconstruction_error(signals),
+    )  # fmt: skip
 
 
-def _modal_hold(points: Sequence, locked: int, omega_modes: np.ndarray) -> ModalHold:
-    """Participation and energy shares of one hold from every mode's point (module notes)."""
+def _modal_hold(
+    readings: Sequence[_Reading], locked: int, omega_modes: np.ndarray, frequency_hz: float
+) -> ModalHold:
+    """Participation and energy shares of one hold from every mode's reading (module notes)."""
     from identification.multimode.solve import energy_shares
 
     n_orders = len(PARTICIPATION_ORDERS)
-    participation = np.zeros((len(points), n_orders), dtype=complex)
-    for m, point in enumerate(points):
+    participation = np.zeros((len(readings), n_orders), dtype=complex)
+    for m, reading in enumerate(readings):
         # the fundamental's phase against the excitation's, the harmonics in its frame
-        angle = math.radians(point.phase_error_deg - 180.0)
-        own = np.concatenate(([1.0], point.harmonics))[:n_orders]
+        angle = math.radians(reading.phase_error_deg - 180.0)
+        own = np.concatenate(([1.0], reading.harmonics))[:n_orders]
         k = np.arange(1, own.size + 1)
-        participation[m, : own.size] = point.amplitude_m * own * np.exp(1j * k * angle)
+        participation[m, : own.size] = reading.amplitude_m * own * np.exp(1j * k * angle)
     k = np.array(PARTICIPATION_ORDERS)
-    reference = np.angle(participation[locked, 0])
-    participation *= np.exp(-1j * k * reference)
-    coefficients = np.zeros((len(points), 1 + 2 * n_orders))
+    participation *= np.exp(-1j * k * np.angle(participation[locked, 0]))
+    coefficients = np.zeros((len(readings), 1 + 2 * n_orders))
     coefficients[:, 1::2] = participation.real
     coefficients[:, 2::2] = -participation.imag
-    omega = 2 * np.pi * points[locked].frequency_hz
-    return ModalHold(participation, energy_shares(coefficients, np.array(omega), omega_modes))
-
-
-def _backbone(record: Any, points: Sequence, levels: Sequence[float], higher: bool) -> Backbone:
-    """One mode's curve of hold points, as the one-mode path builds a record's."""
-    amplitude = np.array([p.amplitude_m for p in points])
-    return Backbone(
-        amplitude_m=amplitude,
-        frequency_hz=[p.frequency_hz for p in points],
-        damping_ratio=[p.damping_ratio for p in points],
-        excitation_level=None if np.isnan(levels).any() else levels,
-        phase_error_deg=[p.phase_error_deg for p in points],
-        label=record.name,
-        source=str(record.path or record.name),
-        harmonics=[p.harmonics for p in points] if higher else None,
-        harmonic_standard_error=[p.harmonic_standard_error for p in points] if higher else None,
-        excitation_harmonics=[p.excitation_harmonics for p in points] if higher else None,
-        mean_offset_m=mean_offsets(amplitude, [p.mean_offset_m for p in points]),
-        time_s=[p.time_s - record.time_s[0] for p in points],
-        settled=[p.settled for p in points],
-        dropped_samples=[p.dropped_samples for p in points],
-    )
+    omega = np.array(2 * np.pi * frequency_hz)
+    return ModalHold(participation, energy_shares(coefficients, omega, omega_modes))
 
 
 class ModalBackboneSet(Sequence[ModalCurve]):
@@ -370,11 +348,16 @@ class ModalBackboneSet(Sequence[ModalCurve]):
                         np.angle(participation[:, m, i])
                     )
                 extra[f"mode{m + 1}_energy_share"] = shares[:, m]
-            for m, backbone in enumerate(curve.backbones):
-                table = BackboneSet([backbone]).to_table()
+            locked = BackboneSet([curve.backbone]).to_table()
+            own = [c for c in locked.columns if c.startswith("harmonic")]
+            for m in range(self.n_modes):
+                table = locked.copy()
                 if m + 1 != curve.locked_mode:
-                    own = [c for c in table.columns if c.startswith("harmonic")]
+                    # the hold's window and excitation; the fit's own figures are the locked
+                    # mode's, so this mode's row keeps only its amplitude
                     table[[*_LOCKED_ONLY, *own]] = np.nan
+                    table[["settled", "dropped_samples"]] = None
+                    table["amplitude_mm"] = 1e3 * np.abs(participation[:, m, 0])
                 table.insert(1, "mode", m + 1)
                 table.insert(2, "hold", np.arange(1, n_holds + 1))
                 for name, values in extra.items():
