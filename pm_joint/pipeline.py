@@ -144,14 +144,27 @@ def campaign_backbones(
     backbones = workspace.extract_backbones()
     figure = plotting.plot_measured_backbones(backbones)
     plotting.save_png(figure, workspace.backbones_csv.with_suffix(".png"), dpi=110)
-    if workspace.layout.test != "free-decay":
+    shapes = _mode_shapes(mode_shapes, workspace)
+    if workspace.layout.test != "free-decay" and _most_given_modes(workspace, shapes) >= 2:
         lines = second_mode_warnings(
-            workspace.records, mode_shapes=_mode_shapes(mode_shapes, workspace),
-            n_periods=workspace.n_periods, threshold=second_mode_share,
+            workspace.records, mode_shapes=shapes, n_periods=workspace.n_periods,
+            threshold=second_mode_share,
         )  # fmt: skip
         for line in lines:
             warnings.warn(line, stacklevel=2)
     return backbones
+
+
+def _most_given_modes(workspace: Workspace, mode_shapes: Modes | None) -> int:
+    """The most mode shapes given to any record (``mode_shapes``, else the TRC modes files),
+    found without reading a record again."""
+    if mode_shapes is not None:
+        return mode_shapes.shapes.shape[1]
+    campaign = workspace.campaign
+    if not isinstance(campaign, Campaign):
+        return 0
+    given = [m.shapes.shape[1] for m in campaign.config_modes().values() if m is not None]
+    return max(given, default=0)
 
 
 def campaign_modal_backbones(
