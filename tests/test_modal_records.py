@@ -271,6 +271,16 @@ def test_column_file_with_several_responses_and_a_mode_shape_file(two_mode_folde
     side = json.loads(sidecar_path(out).read_text())["curves"][0]
     assert side["shapes_source"] == str(shapes)
     assert list(side["reconstruction_error"]) == names
+    # Without a mode-shape file the shapes are estimated from the record (the ramps between
+    # the holds ring the second mode), and the source says so.
+    estimated = tmp_path / "estimated.csv"
+    assert main([*argv[:7], "--modes", "2", "--out", str(estimated)]) == 0
+    side = json.loads(sidecar_path(estimated).read_text())["curves"][0]
+    assert side["shapes_source"].startswith("estimated from the records")
+    np.testing.assert_allclose(side["linear_frequencies_hz"], [105.0, 198.0], atol=1.0)
+    locked = pd.read_csv(estimated).query("mode == 1")
+    np.testing.assert_allclose(locked["frequency_hz"], 105.0, rtol=5e-4)
+    np.testing.assert_allclose(locked["damping_ratio"], 0.01, rtol=0.02)
     # One mode of the same file: the first response's backbone, as with that column alone.
     one, alone = tmp_path / "one.csv", tmp_path / "alone.csv"
     base = ["backbones", str(path), "--relative-response", "--quantity", "velocity"]

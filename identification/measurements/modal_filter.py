@@ -22,8 +22,8 @@ Shapes:
   peak the mode's shape (frequency-domain decomposition). Only peaks where one
   shape dominates (the first singular value :data:`DOMINANCE` times the second
   or more) and that stand out of their surroundings by as much (prominence)
-  count: over noise the singular values are alike, and a ripple on another
-  mode's skirt does not stand out. A peak whose shape is
+  count, the most prominent first: over noise the singular values are alike,
+  and a ripple on another mode's skirt does not stand out as a mode does. A peak whose shape is
   one already taken (MAC above :data:`SAME_SHAPE_MAC`: a harmonic, or the same
   mode at another hold's frequency) is passed over.
 
@@ -323,9 +323,11 @@ def estimate_shapes(
     vectors, values, _ = np.linalg.svd(density)
     first = values[:, 0]
     # A mode's band stands out of its surroundings; a ripple on another's skirt does not.
-    peaks, _ = find_peaks(np.log(first + first.max() * 1e-30), prominence=np.log(DOMINANCE))
+    peaks, found = find_peaks(np.log(first + first.max() * 1e-30), prominence=np.log(DOMINANCE))
     chosen: list[tuple[float, np.ndarray]] = []
-    for p in peaks[np.argsort(first[peaks])[::-1]]:
+    # Most prominent first: a strong mode's leakage skirt holds higher but flatter bumps than
+    # a weak mode's own peak.
+    for p in peaks[np.argsort(found["prominences"], kind="stable")[::-1]]:
         shape = vectors[p, :, 0]
         if values.shape[1] > 1 and first[p] < DOMINANCE * values[p, 1]:
             continue
