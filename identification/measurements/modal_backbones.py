@@ -463,14 +463,17 @@ def second_mode_warnings(
         n_modes = min(given.shapes.shape[1], n_sensors)
         if n_modes < 2:
             continue
-        modal_filter = record_modal_filter(record, n_modes, given)
-        with warnings.catch_warnings():  # the one-mode reading said what its holds say
-            warnings.simplefilter("ignore")
-            curve = modal_curve(record, modal_filter, n_periods, strict=False)
+        where = str(record.path or record.name)
+        try:
+            modal_filter = record_modal_filter(record, n_modes, given)
+            with warnings.catch_warnings():  # the one-mode reading said what its holds say
+                warnings.simplefilter("ignore")
+                curve = modal_curve(record, modal_filter, n_periods, strict=False)
+        except ValueError as exc:  # the one-mode reading stands without the check
+            lines.append(f"{where}: not checked for a second mode: {exc}")
+            continue
         mode, share = curve.largest_other_share()
-        line = second_mode_warning(
-            str(record.path or record.name), modal_filter.frequencies_hz[mode - 1], share, threshold
-        )
+        line = second_mode_warning(where, modal_filter.frequencies_hz[mode - 1], share, threshold)
         if line is not None:
             lines.append(line)
     return lines
