@@ -348,3 +348,27 @@ def test_one_mode_backbones_are_main_bit_for_bit(two_mode_folder, tmp_path):
             warnings.simplefilter("ignore")
             assert main(["backbones", str(folder), "--modes", "1", "--out", str(mine)]) == 0
         assert mine.read_bytes() == (tmp_path / f"{name}_main.csv").read_bytes(), name
+
+
+def test_csv_with_several_response_columns(tmp_path):
+    from identification.measurements.columns import ColumnLayout, read_columns
+
+    t = np.arange(2000) / FS
+    frame = pd.DataFrame(
+        {"time": t, "acc_a": np.sin(600 * t), "acc_b": np.cos(600 * t), "acc_c": t,
+         "base_acc": 0.1 * np.sin(600 * t)}
+    )  # fmt: skip
+    path = tmp_path / "plate.csv"
+    frame.to_csv(path, index=False)
+    layout = ColumnLayout(test="phase-resonance", response="acc_a, acc_c,acc_b")
+    record = read_columns(path, layout)
+    assert record.sensor_names == ("acc_a", "acc_c", "acc_b")
+    assert record.response_name == "acc_a" and record.quantity == "acceleration"
+    np.testing.assert_array_equal(
+        record.sensor_responses, frame[["acc_a", "acc_c", "acc_b"]].to_numpy()
+    )
+    assert record.excitation_name == "base_acc"
+    with pytest.raises(ValueError, match="named twice"):
+        read_columns(path, ColumnLayout(response="acc_a,acc_b,acc_a"))
+    with pytest.raises(ValueError, match="no response column 'acc_d'"):
+        read_columns(path, ColumnLayout(response="acc_a,acc_d"))
