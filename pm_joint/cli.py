@@ -192,11 +192,32 @@ def _cmd_backbones(args: argparse.Namespace) -> None:
 
     workspace = Workspace(args.dir, backbones_csv=args.out, n_periods=args.periods,
                           **_workspace_options(args))  # fmt: skip
+    if args.modes > 1:
+        _decay_modes(workspace, args)
+        return
     backbones = campaign_backbones(workspace)
     points = sum(len(b) for b in backbones)
     print(f"extracted {len(backbones)} backbone(s), {points} points ({args.test}) to "
           f"{workspace.backbones_csv}")  # fmt: skip
     print(extraction_summary(backbones))
+    if args.test == "free-decay":
+        from pm_joint.pipeline import second_mode_warnings
+
+        for line in second_mode_warnings(workspace):
+            print(line, file=sys.stderr)
+
+
+def _decay_modes(workspace: Any, args: argparse.Namespace) -> None:
+    """``backbones --test free-decay --modes N`` (N ≥ 2): each mode's backbone."""
+    from pm_joint.pipeline import campaign_decay_modes
+
+    if args.test != "free-decay":
+        raise ValueError(f"--modes {args.modes} reads free decays here (--test free-decay)")
+    decays = campaign_decay_modes(workspace, args.modes)
+    for decay in decays:
+        print("\n".join(decay.summary()))
+    print(f"extracted {len(decays)} decay(s) by mode ({args.modes} modes) to "
+          f"{workspace.backbones_csv}")  # fmt: skip
 
 
 def _cmd_identify(args: argparse.Namespace) -> None:
@@ -356,6 +377,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dir", help=records)
     p.add_argument("--out", help="CSV file (default DIR/backbones.csv, FILE_backbones.csv)")
     p.add_argument("--periods", type=int, default=70, help="periods per hold (default 70)")
+    p.add_argument("--modes", type=int, default=1, metavar="N",
+                   help="modes (default 1); N ≥ 2 with --test free-decay: each mode's "
+                   "backbone and a mode column")  # fmt: skip
     add_record_options(p)
     p.set_defaults(func=_cmd_backbones)
 

@@ -24,11 +24,18 @@ import numpy as np
 import xarray as xr
 
 from identification.analytical import harmonic, pll
+from identification.artifacts import atomic_write_text
 from identification.criticism.moves import run_rounds
 from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.columns import ColumnCampaign
 from identification.measurements.decay import extract_decay_backbone
+from identification.measurements.decay_modes import (
+    ModalDecay,
+    modal_decay_table,
+    record_decay_modes,
+    record_second_mode,
+)
 from identification.measurements.records import Campaign
 from identification.model import JointModel, parameter_bounds
 from identification.rig import RIG_PRESETS, ForceRig, rig_for_preset
@@ -64,11 +71,13 @@ if TYPE_CHECKING:
 __all__ = [
     "analytical_backbones",
     "campaign_backbones",
+    "campaign_decay_modes",
     "criticize_campaign",
     "identify_campaign",
     "label_records",
     "posterior_report",
     "run_report",
+    "second_mode_warnings",
     "surrogate_box",
     "train_surrogate_stage",
     "update_backbones",
@@ -125,6 +134,22 @@ def campaign_backbones(workspace: Workspace) -> BackboneSet:
     figure = plotting.plot_measured_backbones(backbones)
     plotting.save_png(figure, workspace.backbones_csv.with_suffix(".png"), dpi=110)
     return backbones
+
+
+def campaign_decay_modes(workspace: Workspace, n_modes: int) -> list[ModalDecay]:
+    """Each record's free decay by mode (``--test free-decay --modes N``): the
+    :class:`~identification.measurements.decay_modes.ModalDecay` of each, written as one
+    table (:func:`~identification.measurements.decay_modes.modal_decay_table`) to the
+    workspace's CSV."""
+    decays = [record_decay_modes(r, n_modes, **workspace.decay_options) for r in workspace.records]
+    atomic_write_text(workspace.backbones_csv, modal_decay_table(decays).to_csv(index=False))
+    return decays
+
+
+def second_mode_warnings(workspace: Workspace) -> list[str]:
+    """One warning line per free-decay record that a one-mode reading leaves a second mode in."""
+    found = (record_second_mode(r, **workspace.decay_options) for r in workspace.records)
+    return [line for line in found if line is not None]
 
 
 def identify_campaign(

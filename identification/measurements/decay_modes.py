@@ -59,6 +59,7 @@ __all__ = [
     "decay_backbones_by_mode",
     "modal_decay_table",
     "record_decay_modes",
+    "record_second_mode",
     "second_mode",
     "second_mode_warning",
 ]
@@ -126,6 +127,17 @@ class ModalDecay:
         total = energies.sum(axis=1, keepdims=True)
         return energies / np.where(total > 0, total, 1.0)
 
+    def summary(self) -> list[str]:
+        """Lines for the command line: each mode's points, then :meth:`rules` indented."""
+        source = self.backbones[0].source or self.backbones[0].label
+        modes = ", ".join(
+            f"mode {m + 1}: {len(b)} points, {f:.2f} Hz, {100 * share:.0f} % of the energy"
+            for m, (b, f, share) in enumerate(
+                zip(self.backbones, self.linear_frequency_hz, self.energy_share, strict=True)
+            )
+        )
+        return [f"{source}: {modes}", *(f"  {line}" for line in self.rules())]
+
     def rules(self) -> list[str]:
         """What separated the modes and what each collision was attributed to, one per line."""
         lines = [f"modes separated by {self.method.value}"]
@@ -174,7 +186,7 @@ def _backbone(points: Sequence[DecayPoint], scale: float, label: str, source: st
     )
 
 
-def _modal_filter_points(t, y, shapes, quantity, rate, frequencies_hz, options):
+def _modal_filter_points(t, y, shapes, quantity, rate, frequencies_hz, options, where):
     """Points per mode through the modal filter (several sensors)."""
     phi, error = _real_shapes(shapes)
     if phi.shape[0] != y.shape[1] or phi.shape[0] < phi.shape[1]:
@@ -193,7 +205,7 @@ def _modal_filter_points(t, y, shapes, quantity, rate, frequencies_hz, options):
         others = np.delete(f, m)
         low = max([fm / 1.25, *(math.sqrt(fm * o) for o in others if o < fm)])
         high = min([fm * 1.25, *(math.sqrt(fm * o) for o in others if o > fm)])
-        segments = decay_segments(t, q[m], rate, band_hz=(low, high))
+        segments = decay_segments(t, q[m], rate, band_hz=(low, high), **where)
         if not segments:
             raise ValueError(f"mode {len(points) + 1} ({fm:.5g} Hz): no free decay found")
         found, reason = decay_points(t, q[m], quantity, segments[0], rate, band_hz=(low, high),
@@ -218,6 +230,8 @@ def decay_backbones_by_mode(
     edge_periods: float = 0.0,
     label: str = "decay",
     source: str = "",
+    excitation: np.ndarray | None = None,
+    steps: Any = None,
 ) -> ModalDecay:
     """Each mode's backbone from a free decay (see the module notes).
 
@@ -241,6 +255,9 @@ def decay_backbones_by_mode(
         As for the one-mode decay analysis (:func:`~.decay.decay_points`).
     label, source
         Curve label (each mode's is ``"{label} mode {m}"``) and source.
+    excitation, steps
+        The record's excitation channel and step schedule where it has them: the decay
+        is the first of :func:`~.decay.decay_segments`.
 
     Raises
     ------
@@ -256,6 +273,7 @@ def decay_backbones_by_mode(
     rate = (t.size - 1) / (t[-1] - t[0])
     options = {"window_periods": window_periods, "harmonics": harmonics,
                "edge_periods": edge_periods}  # fmt: skip
+    where = {"excitation": excitation, "steps": steps}
     if y.ndim == 2 and y.shape[1] > 1:
         if shapes is None:
             raise ValueError(f"{y.shape[1]} sensors need the mode shapes at the sensors")
@@ -264,14 +282,14 @@ def decay_backbones_by_mode(
         if phi.shape[1] != n_modes:
             raise ValueError(f"{n_modes} mode(s) asked for, shapes of {phi.shape[1]} given")
         points, reasons, scales, reference, residual, error = _modal_filter_points(
-            t, y, phi, quantity, rate, frequencies_hz, options
+            t, y, phi, quantity, rate, frequencies_hz, options, where
         )
         method, locks, frequencies = Attribution.MODAL_FILTER, (), None
     else:
         found = sensor_mode_points(
             t, y.reshape(-1), quantity, rate, n_modes,
             frequencies_hz=None if frequencies_hz is None else np.asarray(frequencies_hz),
-            **options,
+            **options, **where,
         )  # fmt: skip
         points, reasons, locks = found.points, found.stop_reasons, found.locks
         scales, reference = [1.0] * n_modes, [0] * n_modes
@@ -313,19 +331,31 @@ def decay_backbones_by_mode(
     )
 
 
+def _record_inputs(record: Any, options: dict[str, Any]) -> dict[str, Any]:
+    """The keywords of :func:`decay_backbones_by_mode` for a record (one sensor) and the
+    decay options of the command line (its ``band_hz`` is not used: each mode has its own)."""
+    kept = {k: v for k, v in options.items() if k in ("window_periods", "edge_periods")}
+    return {"quantity": record.quantity, "excitation": getattr(record, "excitation", None),
+            "steps": record.steps, **kept}  # fmt: skip
+
+
 def record_decay_modes(record: Any, n_modes: int, **options: Any) -> ModalDecay:
     """:func:`decay_backbones_by_mode` of a record's response (one sensor), its file named
-    in any error. ``options``: the decay options (``window_periods``, ``edge_periods``,
-    ``band_hz``; a band is not used: each mode finds its own)."""
+    in any error; ``options``: the command line's decay options."""
     where = str(record.path or record.name)
-    options = {k: v for k, v in options.items() if k != "band_hz"}
     try:
         return decay_backbones_by_mode(record.time_s, record.response, n_modes=n_modes,
-                                       quantity=record.quantity, label=record.name,
-                                       source=where, **options)  # fmt: skip
+                                       label=record.name, source=where,
+                                       **_record_inputs(record, options))  # fmt: skip
     except ValueError as exc:
         message = str(exc)
         raise ValueError(message if message.startswith(where) else f"{where}: {message}") from None
+
+
+def record_second_mode(record: Any, **options: Any) -> str | None:
+    """The warning line for a record read as one mode that carries a second (or None)."""
+    found = second_mode(record.time_s, record.response, **_record_inputs(record, options))
+    return None if found is None else second_mode_warning(*found, where=record.path or record.name)
 
 
 def second_mode(
@@ -356,10 +386,11 @@ def second_mode(
     return float(found.linear_frequency_hz[other]), float(energies[other])
 
 
-def second_mode_warning(frequency_hz: float, share: float) -> str:
+def second_mode_warning(frequency_hz: float, share: float, where: Any = None) -> str:
     """The one warning line of a one-mode request on a record that carries a second mode."""
+    record = "the record" if where is None else f"the record {where}"
     return (
-        f"warning: the record carries a second mode near {frequency_hz:.1f} Hz "
+        f"warning: {record} carries a second mode near {frequency_hz:.1f} Hz "
         f"({100 * share:.0f} % of the energy); --modes 2 gives its backbone"
     )
 

@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Any
 
 import numpy as np
 from scipy import optimize
@@ -351,11 +352,14 @@ def sensor_mode_points(
     window_periods: float = 6.0,
     harmonics: int = 3,
     edge_periods: float = 0.0,
+    excitation: np.ndarray | None = None,
+    steps: Any = None,
 ) -> SensorModes:
     """Each mode's backbone points from one sensor's free decay (see the module notes).
 
     ``frequencies_hz``: the modes' linear frequencies where known (else the spectrum's
-    highest peaks, :func:`mode_frequencies_hz`).
+    highest peaks, :func:`mode_frequencies_hz`); ``excitation``, ``steps``: where the
+    record has them, to find its decay (:func:`~.decay.decay_segments`; its first).
 
     Raises
     ------
@@ -365,7 +369,7 @@ def sensor_mode_points(
     """
     t = np.asarray(time_s, dtype=float)
     y = np.asarray(values, dtype=float)
-    segments = decay_segments(t, y, sampling_rate_hz)
+    segments = decay_segments(t, y, sampling_rate_hz, excitation=excitation, steps=steps)
     if not segments:
         raise ValueError("no free decay found")
     segment = segments[0]
