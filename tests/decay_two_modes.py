@@ -30,9 +30,9 @@ class TwoModes:
     quadratic_mode1: float = 0.0
     coupling: float = 0.0
 
-    def forces(self, q1: float, q2: float, v1: float, v2: float) -> tuple[float, float]:
-        """Modal restoring and damping forces per unit modal mass."""
-        w1, w2 = (2 * np.pi * f for f in self.frequency_hz)
+    def forces(self, q1, q2, v1, v2):
+        """Modal restoring and damping forces per unit modal mass (floats or arrays)."""
+        w1, w2 = 2 * np.pi * self.frequency_hz[0], 2 * np.pi * self.frequency_hz[1]
         z1, z2 = self.damping_ratio
         k31, k32 = self.cubic
         f1 = (2 * z1 * w1 * v1 + w1 * w1 * q1 + k31 * q1**3 + self.quadratic_mode1 * q1 * q1
@@ -64,7 +64,7 @@ def two_mode_decay(
     """
 
     def rhs(_, state):
-        q1, q2, v1, v2 = state
+        q1, q2, v1, v2 = state.tolist()
         f1, f2 = modes.forces(q1, q2, v1, v2)
         return [v1, v2, -f1, -f2]
 
@@ -74,7 +74,7 @@ def two_mode_decay(
     if not solution.success:
         raise RuntimeError(f"two-mode decay did not integrate: {solution.message}")
     q, v = solution.y[:2].T, solution.y[2:].T
-    a = -np.array([modes.forces(*qi, *vi) for qi, vi in zip(q, v, strict=True)])
+    a = -np.column_stack(modes.forces(q[:, 0], q[:, 1], v[:, 0], v[:, 1]))
     phi = np.asarray(shapes, dtype=float).reshape(-1, 2)
     return {
         "time_s": round_significant(t, significant_digits),
