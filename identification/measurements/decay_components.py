@@ -33,7 +33,9 @@ __all__ = ["LOCK_RESOLUTION", "ComponentsFit", "Lock", "component_orders", "fit_
 #: Two frequencies closer than this many ``1/T`` (``T`` the window's length) collide: a
 #: window of a few periods separates them only through an ill-conditioned fit.
 LOCK_RESOLUTION = 1.5
-_MAX_ITERATIONS = 60
+#: Gauss–Newton iterations per window at most.
+_MAX_ITERATIONS = 40
+#: Relative change of the residual sum of squares that ends the iterations.
 _TOLERANCE = 1e-12
 
 
