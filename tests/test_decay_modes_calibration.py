@@ -6,8 +6,11 @@ noise and sensor quantity; the independent one-mode simulator) at most one warni
 false-alarm rate whose 95 % Clopper–Pearson interval then stays below 25 %); over ``N``
 two-mode decays near 1:2 (detuning up to ±5 Hz, mode 1 with a random 2nd harmonic, mode 2
 carrying 10–50 % of the energy at the sensor; the independent two-mode simulator) at least
-``N − 1`` warnings, each naming mode 2's frequency within 1 Hz. Seeds from 1 000 000 (the
-held-out block): the rule was chosen on the decays of ``test_decay_modes.py`` (seeds 0–6).
+``N − 1`` warnings, each naming mode 2's frequency within 1 Hz. The rule was chosen on the
+decays of ``test_decay_modes.py`` (seeds 0–6); its first run on the held-out block 1 000 000
+gave 0 of 20 and 20 of 20; the peak picking then learnt to leave out peaks with fewer than a
+window's periods in the decay (the slow mean of a displacement), so the study moved to the
+fresh block 2 000 000.
 """
 
 import numpy as np
@@ -17,7 +20,7 @@ from independent_sim import free_decay
 
 from identification.measurements.decay_modes import second_mode
 
-HELD_OUT_SEED = 1_000_000
+HELD_OUT_SEED = 2_000_000
 N = 20
 AMPLITUDE_M = 1e-3
 

@@ -128,7 +128,8 @@ def mode_frequencies_hz(
 ) -> np.ndarray:
     """The ``n_modes`` highest peaks of the decay's Hann spectrum (Hz, increasing).
 
-    Peaks are taken from the highest down, each farther than a window's resolution
+    Peaks with fewer than ``window_periods`` periods in the decay are left out; the others
+    are taken from the highest down, each farther than a window's resolution
     (:data:`LOCK_SEPARATION` over a window of ``window_periods`` periods of the highest peak)
     from those already taken: the smeared peak of a mode whose frequency moves over the
     decay counts once. A mode's own harmonic can be taken, as can a mode near it: the
@@ -139,6 +140,9 @@ def mode_frequencies_hz(
     spectrum = np.abs(np.fft.rfft(y * np.hanning(n), 8 * n))
     freqs = np.fft.rfftfreq(8 * n, 1.0 / sampling_rate_hz)
     peaks, _ = sps.find_peaks(spectrum)
+    # A mode whose window is longer than the decay has no point: lower peaks are the slow
+    # mean of a displacement, not a mode.
+    peaks = peaks[freqs[peaks] * n / sampling_rate_hz > window_periods]
     peaks = peaks[np.argsort(spectrum[peaks])[::-1]]
     if peaks.size == 0:
         raise ValueError("the record's spectrum shows no peak")
@@ -221,7 +225,8 @@ def _march(t, y, segment, frequencies_hz, window_periods, harmonics, edge_period
                 relative = fit.phasor_standard_error[slot][0] / max(abs(fit.phasors[slot][0]),
                                                                     1e-300)  # fmt: skip
                 if not (fit.converged and low <= fit.omega[slot] / (2 * math.pi) <= high):
-                    failed.append((m, f"the window fit at {centre:.4g} s left the band"))
+                    failed.append((m, f"the window fit at {centre:.4g} s did not converge "
+                                      "inside the band"))  # fmt: skip
                 elif relative > NOISE_LIMIT:
                     failed.append((m, f"the noise floor at {centre:.4g} s"))
             if not failed:
