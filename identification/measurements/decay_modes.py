@@ -48,6 +48,7 @@ from identification.measurements.decay import (
 from identification.measurements.decay_sensor import (
     Attribution,
     LockAttribution,
+    mode_bands_hz,
     sensor_mode_points,
 )
 from identification.measurements.local_fit import dominant_frequency_hz
@@ -200,15 +201,11 @@ def _modal_filter_points(t, y, shapes, quantity, rate, frequencies_hz, options, 
          if frequencies_hz is None else np.asarray(frequencies_hz, dtype=float))  # fmt: skip
     order = np.argsort(f)
     points, reasons, scales, reference = [], [], [], []
-    for m in order:
-        fm = f[m]
-        others = np.delete(f, m)
-        low = max([fm / 1.25, *(math.sqrt(fm * o) for o in others if o < fm)])
-        high = min([fm * 1.25, *(math.sqrt(fm * o) for o in others if o > fm)])
-        segments = decay_segments(t, q[m], rate, band_hz=(low, high), **where)
+    for m, band in zip(order, mode_bands_hz(f[order]), strict=True):
+        segments = decay_segments(t, q[m], rate, band_hz=band, **where)
         if not segments:
-            raise ValueError(f"mode {len(points) + 1} ({fm:.5g} Hz): no free decay found")
-        found, reason = decay_points(t, q[m], quantity, segments[0], rate, band_hz=(low, high),
+            raise ValueError(f"mode {len(points) + 1} ({f[m]:.5g} Hz): no free decay found")
+        found, reason = decay_points(t, q[m], quantity, segments[0], rate, band_hz=band,
                                      **options)  # fmt: skip
         points.append(found)
         reasons.append(reason)

@@ -61,6 +61,7 @@ __all__ = [
     "Attribution",
     "LockAttribution",
     "SensorModes",
+    "mode_bands_hz",
     "mode_frequencies_hz",
     "sensor_mode_points",
 ]
@@ -157,9 +158,9 @@ def mode_frequencies_hz(
                      "asked for")  # fmt: skip
 
 
-def _bands(frequencies_hz: np.ndarray) -> list[tuple[float, float]]:
-    """Each mode's band: ``BAND_FACTOR`` about it, and no further than half-way (geometric)
-    to its neighbours."""
+def mode_bands_hz(frequencies_hz: np.ndarray) -> list[tuple[float, float]]:
+    """Each mode's band (Hz; frequencies in increasing order): ``BAND_FACTOR`` about it, and
+    no further than half-way (geometric) to its neighbours."""
     f = np.asarray(frequencies_hz, dtype=float)
     bands = []
     for m, fm in enumerate(f):
@@ -186,7 +187,7 @@ def _march(t, y, segment, frequencies_hz, window_periods, harmonics, edge_period
     start, stop = segment
     f = np.asarray(frequencies_hz, dtype=float)
     window_s = window_periods / f[0]
-    bands = _bands(f)
+    bands = mode_bands_hz(f)
     params = np.column_stack([2 * math.pi * f, np.zeros_like(f), np.zeros_like(f)])
     active = list(range(f.size))
     reasons = ["the decay's end"] * f.size
