@@ -99,17 +99,28 @@ def test_uncoupled_linear_modes_give_what_was_put_in(linear_pair, sensors):
         assert slope == pytest.approx(-2 * zeta * 2 * np.pi * f, rel=DAMPING_RTOL)
 
 
-def test_cubic_modes_follow_the_first_order_law():
-    f = np.array([105.0, 260.0])
-    w = 2 * np.pi * f
-    zeta = np.array([0.004, 0.002])
-    k3 = 0.005 * 8 * w**2 / 3 / 1e-6  # 0.5 % hardening at 1 mm of modal amplitude
-    modes = TwoModes(tuple(f), tuple(zeta), cubic=tuple(k3))
-    decay = two_mode_decay(modes, (1e-3, 1e-3), SHAPES, duration_s=0.8)
-    found = decay_backbones_by_mode(decay["time_s"], _noisy(decay, 1), n_modes=2,
-                                    quantity="displacement", shapes=SHAPES)  # fmt: skip
+CUBIC_HZ = np.array([105.0, 260.0])
+CUBIC_ZETA = np.array([0.004, 0.002])
+#: 0.5 % hardening at 1 mm of modal amplitude
+CUBIC_K3 = 0.005 * 8 * (2 * np.pi * CUBIC_HZ) ** 2 / 3 / 1e-6
+
+
+@pytest.fixture(scope="module")
+def cubic_pair():
+    modes = TwoModes(tuple(CUBIC_HZ), tuple(CUBIC_ZETA), cubic=tuple(CUBIC_K3))
+    return two_mode_decay(modes, (1e-3, 1e-3), SHAPES, duration_s=0.8)
+
+
+@pytest.mark.parametrize("sensors", ["three", "one"])
+def test_cubic_modes_follow_the_first_order_law(cubic_pair, sensors):
+    w, zeta, k3 = 2 * np.pi * CUBIC_HZ, CUBIC_ZETA, CUBIC_K3
+    y = _noisy(cubic_pair, 1)
+    # one sensor: the second, where both shapes are large
+    shapes, reading = (SHAPES, SHAPES) if sensors == "three" else (None, SHAPES[1:2])
+    found = decay_backbones_by_mode(cubic_pair["time_s"], y if shapes is not None else y[:, 1],
+                                    n_modes=2, quantity="displacement", shapes=shapes)  # fmt: skip
     for m, backbone in enumerate(found.backbones):
-        a = backbone.amplitude_m / np.abs(SHAPES[:, m]).max()  # the modal amplitude
+        a = backbone.amplitude_m / np.abs(reading[:, m]).max()  # the modal amplitude
         assert a.max() > 0.9e-3 and a.min() < 0.15e-3
         law = w[m] + 3 * k3[m] * a**2 / (8 * w[m])
         np.testing.assert_allclose(2 * np.pi * backbone.frequency_hz, law * np.sqrt(1 - zeta[m]**2),
@@ -119,10 +130,18 @@ def test_cubic_modes_follow_the_first_order_law():
                                    rtol=DAMPING_RTOL)  # fmt: skip
 
 
-def test_one_sensor_near_one_to_two_splits_harmonic_from_mode(harmonic_and_mode):
+#: Each quantity's key and the noise's scale (the displacement noise at mode 1).
+QUANTITIES = {"displacement": ("displacement_m", 1.0), "velocity": ("velocity_m_s", W1),
+              "acceleration": ("acceleration_m_s2", W1**2)}  # fmt: skip
+
+
+@pytest.mark.parametrize("quantity", list(QUANTITIES))
+def test_one_sensor_near_one_to_two_splits_harmonic_from_mode(harmonic_and_mode, quantity):
     _, decay = harmonic_and_mode
-    y = _noisy(decay, 2)[:, 0]
-    found = decay_backbones_by_mode(decay["time_s"], y, n_modes=2, quantity="displacement")
+    key, scale = QUANTITIES[quantity]
+    rng = np.random.default_rng(2)
+    y = decay[key][:, 0] + rng.normal(0.0, NOISE_M * scale, decay["time_s"].size)
+    found = decay_backbones_by_mode(decay["time_s"], y, n_modes=2, quantity=quantity)
     (lock,) = found.locks
     assert (lock.lock.lower, lock.lock.order, lock.lock.upper) == (0, 2, 1)
     assert lock.rule is Attribution.SPLIT
