@@ -257,3 +257,21 @@ def test_a_one_mode_decay_gives_no_warning(tmp_path, capsys):
     pd.DataFrame({"time": decay["time_s"], "displacement": values}).to_csv(path, index=False)
     captured = _backbones(path, 1, tmp_path / "one.csv", capsys)
     assert "second mode" not in captured.err
+
+
+def test_complex_shapes_of_one_phase_are_normal_modes(linear_pair):
+    modes, decay = linear_pair
+    y = _noisy(decay, 0)
+    turned = SHAPES * np.exp(1j * np.array([0.3, -1.1]))  # each mode's shape at one phase
+    found = decay_backbones_by_mode(decay["time_s"], y, n_modes=2, quantity="displacement",
+                                    shapes=turned)  # fmt: skip
+    np.testing.assert_allclose(found.normal_mode_error, 0.0, atol=1e-12)
+    for backbone, f, zeta in zip(found.backbones, modes.frequency_hz, modes.damping_ratio,
+                                 strict=True):  # fmt: skip
+        _check_linear(backbone, f, zeta)
+    # a shape whose points are out of phase is no normal mode: its error is reported
+    skewed = SHAPES.astype(complex)
+    skewed[2, 1] *= np.exp(0.2j)
+    found = decay_backbones_by_mode(decay["time_s"], y, n_modes=2, quantity="displacement",
+                                    shapes=skewed)  # fmt: skip
+    assert found.normal_mode_error[0] < 1e-12 < found.normal_mode_error[1]
