@@ -1,8 +1,9 @@
 """Backbones of several modes from free decays, against an independent two-mode ring-down.
 
-The decays come from :mod:`decay_two_modes` (scipy's DOP853 on two modal equations written in
-plain Python; nothing of pm-joint), read by one sensor or by three through the mode shapes,
-with sensor noise, time stamps rounded to 7 significant digits. The truths are analytical:
+The decays come from the independent simulator (:func:`independent.decays.modal_free_decay`:
+scipy's DOP853 on modal equations of its own; nothing of pm-joint's kernels), read by one
+sensor or by three through the mode shapes, with sensor noise, time stamps rounded to 7
+significant digits. The truths are analytical:
 the frequencies and damping ratios put in for linear modes; the first-order laws of a cubic
 (``ω = ω₀ + 3k₃a²/(8ω₀)``) and of a quadratic (``ω = ω₀ − 5k₂²a²/(12ω₀³)``, 2nd harmonic
 ``k₂a/(6ω₀²)``) stiffness; and, for the ``κq₁²q₂`` coupling, the harmonic balance of mode 1
@@ -15,8 +16,8 @@ import re
 import numpy as np
 import pandas as pd
 import pytest
-from decay_two_modes import TwoModes, two_mode_decay
 from independent_sim import free_decay
+from two_modes import TwoModes, two_mode_decay
 
 from identification.measurements.backbone import BackboneSet
 from identification.measurements.columns import ColumnRecord

@@ -15,8 +15,8 @@ fresh block 2 000 000.
 
 import numpy as np
 import pytest
-from decay_two_modes import TwoModes, two_mode_decay
 from independent_sim import free_decay
+from two_modes import TwoModes, two_mode_decay
 
 from identification.measurements.decay_modes import second_mode
 
