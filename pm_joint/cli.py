@@ -196,7 +196,10 @@ def _cmd_backbones(args: argparse.Namespace) -> None:
     workspace = Workspace(args.dir, backbones_csv=args.out, n_periods=args.periods,
                           **_workspace_options(args))  # fmt: skip
     if args.modes > 1:
-        _modal_backbones(workspace, args)
+        if args.test == "free-decay":
+            _decay_modes(workspace, args)
+        else:
+            _modal_backbones(workspace, args)
         return
     backbones = campaign_backbones(workspace, mode_shapes=args.mode_shapes,
                                    second_mode_share=args.second_mode_share)  # fmt: skip
@@ -204,6 +207,22 @@ def _cmd_backbones(args: argparse.Namespace) -> None:
     print(f"extracted {len(backbones)} backbone(s), {points} points ({args.test}) to "
           f"{workspace.backbones_csv}")  # fmt: skip
     print(extraction_summary(backbones))
+    if args.test == "free-decay":
+        from pm_joint.pipeline import decay_second_mode_warnings
+
+        for line in decay_second_mode_warnings(workspace):
+            print(line, file=sys.stderr)
+
+
+def _decay_modes(workspace: Any, args: argparse.Namespace) -> None:
+    """``backbones --test free-decay --modes N`` (N ≥ 2): each mode's backbone."""
+    from pm_joint.pipeline import campaign_decay_modes
+
+    decays = campaign_decay_modes(workspace, args.modes)
+    for decay in decays:
+        print("\n".join(decay.summary()))
+    print(f"extracted {len(decays)} decay(s) by mode ({args.modes} modes) to "
+          f"{workspace.backbones_csv}")  # fmt: skip
 
 
 def _modal_backbones(workspace, args: argparse.Namespace) -> None:

@@ -24,11 +24,18 @@ import numpy as np
 import xarray as xr
 
 from identification.analytical import harmonic, pll
+from identification.artifacts import atomic_write_text
 from identification.criticism.moves import run_rounds
 from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.columns import ColumnCampaign
 from identification.measurements.decay import extract_decay_backbone
+from identification.measurements.decay_modes import (
+    ModalDecay,
+    modal_decay_table,
+    record_decay_modes,
+    record_second_mode,
+)
 from identification.measurements.modal_backbones import (
     ModalBackboneSet,
     extract_modal_backbones,
@@ -71,12 +78,15 @@ if TYPE_CHECKING:
 __all__ = [
     "analytical_backbones",
     "campaign_backbones",
+    "campaign_decay_modes",
     "campaign_modal_backbones",
     "criticize_campaign",
+    "decay_second_mode_warnings",
     "identify_campaign",
     "label_records",
     "posterior_report",
     "run_report",
+    "second_mode_warnings",
     "surrogate_box",
     "train_surrogate_stage",
     "update_backbones",
@@ -180,12 +190,11 @@ def campaign_modal_backbones(
     source, reference sensors, alignment and reconstruction errors) are
     described in :mod:`identification.measurements.modal_backbones`; a PNG per
     mode (``…_mode{m}.png``) draws the backbones of the records that locked it.
-    Free decays read per mode are not wired here yet.
+    Free decays read per mode: :func:`campaign_decay_modes`.
     """
     if workspace.layout.test == "free-decay":
         raise ValueError(
-            f"--modes {n_modes} on free decays is not yet available in this version "
-            "(PLL and stepped-sine holds are); read one mode, or the holds"
+            f"--modes {n_modes} on free decays: use campaign_decay_modes (this reads holds)"
         )
     result = extract_modal_backbones(
         workspace.records, n_modes, mode_shapes=_mode_shapes(mode_shapes, workspace),
@@ -208,6 +217,22 @@ def _mode_shapes(
     if mode_shapes is None or isinstance(mode_shapes, Modes):
         return mode_shapes
     return read_modes(mode_shapes, decimal_comma=workspace.layout.decimal_comma, points=None)
+
+
+def campaign_decay_modes(workspace: Workspace, n_modes: int) -> list[ModalDecay]:
+    """Each record's free decay by mode (``--test free-decay --modes N``): the
+    :class:`~identification.measurements.decay_modes.ModalDecay` of each, written as one
+    table (:func:`~identification.measurements.decay_modes.modal_decay_table`) to the
+    workspace's CSV."""
+    decays = [record_decay_modes(r, n_modes, **workspace.decay_options) for r in workspace.records]
+    atomic_write_text(workspace.backbones_csv, modal_decay_table(decays).to_csv(index=False))
+    return decays
+
+
+def decay_second_mode_warnings(workspace: Workspace) -> list[str]:
+    """One warning line per free-decay record that a one-mode reading leaves a second mode in."""
+    found = (record_second_mode(r, **workspace.decay_options) for r in workspace.records)
+    return [line for line in found if line is not None]
 
 
 def identify_campaign(

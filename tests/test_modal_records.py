@@ -315,13 +315,6 @@ def test_one_mode_reading_warns_once_of_a_second_mode_it_leaves_out(tmp_path):
     assert not [w for w in caught if "second mode" in str(w.message)]
 
 
-def test_free_decays_of_several_modes_are_not_wired_yet(two_mode_folder, tmp_path, capsys):
-    argv = ["backbones", str(two_mode_folder), "--test", "free-decay", "--modes", "2",
-            "--out", str(tmp_path / "bb.csv")]  # fmt: skip
-    assert main(argv) == 2
-    assert "not yet" in capsys.readouterr().err
-
-
 # --------------------------------------------------------------------------------------
 # --modes 1 is main's path, bit for bit
 

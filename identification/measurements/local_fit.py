@@ -33,12 +33,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal as sps
 
+from identification.measurements.decay_components import fit_components
+
 __all__ = ["LocalFit", "dominant_frequency_hz", "fit_window"]
 
-#: Gauss–Newton iterations per window at most.
-_MAX_ITERATIONS = 40
-#: Relative change of the residual sum of squares that ends the iterations.
-_TOLERANCE = 1e-12
 #: Zero padding of the spectrum that starts a fit (times the segment length).
 _PADDING = 16
 
@@ -134,28 +132,6 @@ def dominant_frequency_hz(
     return float(freqs[i])
 
 
-def _columns(tau, omega, beta, sigma, harmonics):
-    """Basis ``[1, τ, E_k cos kφ…, E_k sin kφ…]`` and the pieces its derivatives need."""
-    k = np.arange(1, harmonics + 1)
-    phase = np.outer(omega * tau + 0.5 * beta * tau**2, k)
-    envelope = np.exp(-np.outer(tau, k) * sigma)
-    cos, sin = envelope * np.cos(phase), envelope * np.sin(phase)
-    basis = np.column_stack([np.ones_like(tau), tau, cos, sin])
-    return basis, cos, sin, k
-
-
-def _jacobian(tau, linear, cos, sin, k, basis):
-    """Model derivatives: the basis, then ∂/∂ω, ∂/∂β, ∂/∂σ."""
-    h = k.size
-    a, b = linear[2 : 2 + h], linear[2 + h :]
-    quadrature = (-sin * a + cos * b) * k  # ∂/∂(phase) of Σ a cos + b sin, per unit of φ
-    in_phase = (cos * a + sin * b) * k
-    d_omega = tau * quadrature.sum(axis=1)
-    d_beta = 0.5 * tau**2 * quadrature.sum(axis=1)
-    d_sigma = -tau * in_phase.sum(axis=1)
-    return np.column_stack([basis, d_omega, d_beta, d_sigma])
-
-
 def fit_window(
     time_s: np.ndarray,
     values: np.ndarray,
@@ -166,7 +142,8 @@ def fit_window(
     sigma: float = 0.0,
     harmonics: int = 3,
 ) -> LocalFit:
-    """Fit the module's model to the samples of one window.
+    """Fit the module's model to the samples of one window: the one-mode case of
+    :func:`~identification.measurements.decay_components.fit_components`.
 
     Parameters
     ----------
@@ -184,63 +161,22 @@ def fit_window(
     ValueError
         Too few samples for the model, or a singular fit (a flat window).
     """
-    tau = np.asarray(time_s, dtype=float) - centre_s
-    y = np.asarray(values, dtype=float)
-    n_linear = 2 + 2 * harmonics
-    n_params = n_linear + 3
-    if y.size <= 2 * n_params:
-        raise ValueError(f"a window of {y.size} samples is too short for {n_params} parameters")
-    nonlinear = np.array([omega, beta, sigma], dtype=float)
-    basis, cos, sin, k = _columns(tau, *nonlinear, harmonics)
-    linear = np.linalg.lstsq(basis, y, rcond=None)[0]
-    rss = float(np.sum((y - basis @ linear) ** 2))
-    converged = False
-    for _ in range(_MAX_ITERATIONS):
-        jac = _jacobian(tau, linear, cos, sin, k, basis)
-        norms = np.linalg.norm(jac, axis=0)
-        norms[norms == 0] = 1.0
-        step = np.linalg.lstsq(jac / norms, y - basis @ linear, rcond=None)[0] / norms
-        for _halving in range(30):
-            trial_nonlinear = nonlinear + step[n_linear:]
-            trial = _columns(tau, *trial_nonlinear, harmonics)
-            trial_linear = linear + step[:n_linear]
-            trial_rss = float(np.sum((y - trial[0] @ trial_linear) ** 2))
-            if trial_rss <= rss:
-                break
-            step = 0.5 * step
-        else:
-            converged = True  # no step lowers the residual: at the optimum to rounding
-            break
-        done = rss - trial_rss <= _TOLERANCE * rss
-        nonlinear, linear, rss = trial_nonlinear, trial_linear, trial_rss
-        basis, cos, sin, k = trial
-        if done:
-            converged = True
-            break
-    jac = _jacobian(tau, linear, cos, sin, k, basis)
-    dof = max(y.size - n_params, 1)
-    variance = rss / dof
-    try:
-        covariance = variance * np.linalg.inv(jac.T @ jac)
-    except np.linalg.LinAlgError:
-        raise ValueError("singular window fit (the window is flat or too short)") from None
-    se = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
-    h = harmonics
-    phasors = linear[2 : 2 + h] - 1j * linear[2 + h :]
-    phasor_se = np.sqrt(0.5 * (se[2 : 2 + h] ** 2 + se[2 + h : n_linear] ** 2))
+    fit = fit_components(time_s, values, centre_s, np.array([[omega, beta, sigma]]),
+                         [tuple(range(1, harmonics + 1))])  # fmt: skip
+    se = fit.nonlinear_standard_error[0]
     return LocalFit(
-        centre_s=float(centre_s),
-        frequency_hz=float(nonlinear[0] / (2 * math.pi)),
-        chirp_hz_s=float(nonlinear[1] / (2 * math.pi)),
-        decay_rate_1_s=float(nonlinear[2]),
-        phasors=phasors,
-        phasor_standard_error=phasor_se,
-        mean=float(linear[0]),
-        mean_standard_error=float(se[0]),
-        frequency_standard_error_hz=float(se[n_linear] / (2 * math.pi)),
-        chirp_standard_error_hz_s=float(se[n_linear + 1] / (2 * math.pi)),
-        decay_rate_standard_error_1_s=float(se[n_linear + 2]),
-        residual_rms=math.sqrt(rss / y.size),
-        n_samples=int(y.size),
-        converged=converged,
+        centre_s=fit.centre_s,
+        frequency_hz=float(fit.omega[0] / (2 * math.pi)),
+        chirp_hz_s=float(fit.beta[0] / (2 * math.pi)),
+        decay_rate_1_s=float(fit.sigma[0]),
+        phasors=fit.phasors[0],
+        phasor_standard_error=fit.phasor_standard_error[0],
+        mean=fit.mean,
+        mean_standard_error=fit.mean_standard_error,
+        frequency_standard_error_hz=float(se[0] / (2 * math.pi)),
+        chirp_standard_error_hz_s=float(se[1] / (2 * math.pi)),
+        decay_rate_standard_error_1_s=float(se[2]),
+        residual_rms=fit.residual_rms,
+        n_samples=fit.n_samples,
+        converged=fit.converged,
     )
