@@ -239,7 +239,8 @@ def criticism_section(
     )  # fmt: skip
     if content.get("small"):  # a record written before the qualifier has none
         verdict += f" It is {SMALL.removeprefix('missing, ')}."
-    fails = "; ".join(r.get("text", str(r)) for r in content.get("fails_at", [])) or "nowhere"
+    nowhere = "at no single level beyond the scatter" if content.get("small") else "nowhere"
+    fails = "; ".join(r.get("text", str(r)) for r in content.get("fails_at", [])) or nowhere
     findings = [_round_finding(k, len(rounds), r) for k, r in enumerate(rounds, start=1)]
     final = f"The final model, {content['equation']}: {verdict} Where it fails: {fails}."
     rankings = [

@@ -130,3 +130,21 @@ def test_the_verdicts_are_one_list_written_as_plain_strings():
     ]  # fmt: skip
     assert Verdict("partly explained") is Verdict.PARTLY_EXPLAINED
     assert json.dumps(Verdict.NOT_EXPLAINED) == '"not explained by the catalogue"'
+
+
+def test_the_report_says_a_finding_is_small(tmp_path):
+    from pm_joint.html import criticism_section
+
+    summary = "model: m\nfails: at no single level beyond the scatter\nverdict: v"
+    round_ = {"action": "start", "verdict": "explained", "summary": summary,
+              "verdict_text": f"explained by cubic_stiffness; {SMALL}", "significant": True,
+              "small": True, "ranking": []}  # fmt: skip
+    record = {"significant": True, "small": True, "equation": "m", "fails_at": [],
+              "history": [], "rounds": [round_]}  # fmt: skip
+    first, final = criticism_section(record, tmp_path / "c", tmp_path).text.split("\n\n")
+    assert first.endswith(f"{SMALL}. Where it fails: at no single level beyond the scatter.")
+    assert final == (
+        "The final model, m: Something significant is missing. It is small: seen in the trend "
+        "over the levels, within the scatter at each. Where it fails: at no single level beyond "
+        "the scatter."
+    )
