@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from identification.criticism.adequacy import no_solution
+from identification.criticism.config import Verdict
 from identification.criticism.directions import mean_prediction
 from identification.criticism.readings import CHANNEL_LABELS
 from identification.criticism.records import Candidate, rmse_pairs
@@ -21,6 +22,7 @@ if TYPE_CHECKING:
     from identification.criticism.criticism import Criticism
 
 __all__ = [
+    "SMALL",
     "caveats",
     "nearby_mode_words",
     "no_solution_texts",
@@ -29,24 +31,33 @@ __all__ = [
     "verdict_text",
 ]
 
+#: What a finding no single level shows is (:attr:`Decision.small
+#: <identification.criticism.decision.Decision.small>`), in words.
+SMALL = "missing, small: seen in the trend over the levels, within the scatter at each"
+
 
 def verdict_text(crit: Criticism) -> str:
-    """The verdict in one sentence."""
+    """The verdict in one sentence (with :data:`SMALL` where no single level shows it)."""
+    text = _verdict_words(crit)
+    return f"{text}; {SMALL}" if crit.small else text
+
+
+def _verdict_words(crit: Criticism) -> str:
     verdict, share = crit.verdict, crit.explained_share
-    if verdict == "nothing missing":
+    if verdict == Verdict.NOTHING_MISSING:
         return "nothing missing beyond the scatter"
-    if verdict == "drift":
+    if verdict == Verdict.DRIFT:
         return "nothing missing as physics; the branches show drift (see below)"
     best = crit.best
-    if verdict == "explained":
+    if verdict == Verdict.EXPLAINED:
         return f"explained by {best.effect} ({100 * (share or 1):.0f} % of the free-form gain)"
-    if verdict == "partly explained" and best.alternative:
+    if verdict == Verdict.PARTLY_EXPLAINED and best.alternative:
         captured = f"{100 * share:.0f} %" if share is not None else "all"
         return (
             f"partly explained: {best.effect} fits ({captured} of the free-form gain) but is "
             f"not identified; consistent with {best.effect} OR with {best.alternative}"
         )
-    if verdict == "partly explained":
+    if verdict == Verdict.PARTLY_EXPLAINED:
         captured = f"{100 * share:.0f} %" if share is not None else "all"
         text = (
             f"partly explained: {best.effect} captures {captured} of what a free-form "
@@ -115,7 +126,9 @@ def summary(crit: Criticism) -> str:
     )
     lines += [f"caveat: {c}" for c in crit.caveats]
     failures = crit.where()
-    lines += [f"fails: {f.text}" for f in failures] or ["fails: nowhere beyond the scatter"]
+    nowhere = "at no single level" if crit.small else "nowhere"
+    nowhere += " beyond the scatter"
+    lines += [f"fails: {f.text}" for f in failures] or [f"fails: {nowhere}"]
     for text in no_solution_texts(crit):
         lines.append(f"fails: {text}")
     lines.append(f"verdict: {crit.verdict_text}")
