@@ -18,7 +18,9 @@ Outside the library: this package may import ``identification``, ``surrogates`` 
 
 Beside them: :mod:`studies.campaigns` (the campaign simulators), :mod:`studies.driver`
 (the one campaign driver of the null, swap and term-group studies), :mod:`studies.rows`
-(typed rows written as dicts and tables) and :mod:`studies.binomial` (intervals of rates).
+(typed rows written as dicts and tables), :mod:`studies.binomial` (intervals of rates) and
+:mod:`studies.seeds` (the seed convention: tuning seeds below :data:`HELD_OUT_SEED`,
+held-out seeds from it up).
 """
 
 from studies.binomial import binomial_bounds, clopper_pearson
@@ -40,11 +42,13 @@ from studies.hidden_effects import (
 )
 from studies.nulls import NULL_TRUTHS, NullRow, null_study
 from studies.rows import Row, rows_table
+from studies.seeds import HELD_OUT_SEED, SeedRange, held_out_block, held_out_seeds, is_held_out
 from studies.swaps import SWAP_TRUTHS, SwapRow, SwapTrial, swap_study
 from studies.table5 import Table5Row, table5_study
 from studies.term_groups import TERM_TRUTHS, TermGroupRow, TermTrial, term_group_study
 
 __all__ = [
+    "HELD_OUT_SEED",
     "KEY_CHANNEL",
     "NULL_CONDITIONS",
     "NULL_TRUTHS",
@@ -57,6 +61,7 @@ __all__ = [
     "Coverage",
     "NullRow",
     "Row",
+    "SeedRange",
     "StudyResult",
     "SwapRow",
     "SwapTrial",
@@ -67,7 +72,10 @@ __all__ = [
     "clopper_pearson",
     "criticism_study",
     "draw_lab_campaign",
+    "held_out_block",
+    "held_out_seeds",
     "is_discovery",
+    "is_held_out",
     "null_study",
     "pll_campaign",
     "population_coverage",

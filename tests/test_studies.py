@@ -4,18 +4,24 @@ back, and the effect lists taken from the catalogue."""
 import json
 import math
 
+import pytest
+
 from identification.effects import CATALOGUE
 from identification.rig import RIG_PRESETS
 from identification.rig.presets import lab_hidden_scenario
 from studies import (
+    HELD_OUT_SEED,
     KEY_CHANNEL,
     NULL_TRUTHS,
     SWAP_TRUTHS,
     TERM_TRUTHS,
     CampaignRow,
+    SeedRange,
     SwapRow,
     SwapTrial,
     TermTrial,
+    held_out_seeds,
+    is_held_out,
     rows_table,
     run_campaigns,
 )
@@ -76,3 +82,16 @@ def test_the_effect_lists_come_from_the_catalogue():
                for n in hidden)  # fmt: skip
     assert set(SWAP_TRUTHS) < set(TERM_TRUTHS) <= set(hidden)
     assert all(preset in RIG_PRESETS for preset in NULL_TRUTHS.values())
+
+
+def test_held_out_seeds_start_at_the_convention_and_never_straddle_it():
+    """COMMON.md's convention: tuning seeds below 1 000 000, held-out ones from it up."""
+    assert HELD_OUT_SEED == 1_000_000
+    first = held_out_seeds(3)
+    assert list(first) == [1_000_000, 1_000_001, 1_000_002] and first.held_out
+    assert first.to_dict() == {"first": 1_000_000, "last": 1_000_002, "count": 3,
+                               "kind": "held-out"}  # fmt: skip
+    assert held_out_seeds(2, block=2, offset=5).first == 2_000_005
+    assert SeedRange(0, 5).kind == "tuning" and not is_held_out(999_999)
+    with pytest.raises(ValueError, match="straddle"):
+        SeedRange(999_999, 2)
