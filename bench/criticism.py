@@ -65,6 +65,7 @@ from identification.rig import (
 from studies import (
     HELD_OUT_SEED,
     NULL_CONDITIONS,
+    CampaignSource,
     HiddenOutcome,
     NullRow,
     SeedRange,
@@ -95,6 +96,20 @@ STUDY_COLUMNS = (
     "explained_share", "threshold", "final_verdict", "final_p_value", "passed", "outcome",
     "seconds",
 )  # fmt: skip
+
+
+def campaign_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--seed`` and ``--source`` of the driven studies' benches (swaps, term groups)."""
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=HELD_OUT_SEED,
+        help="seed of the campaigns (held out from 1 000 000: studies.seeds)",
+    )
+    parser.add_argument("--source", choices=[str(s) for s in CampaignSource],
+                        default=str(CampaignSource.LAB_RIG),
+                        help="where the campaigns come from: the lab rig (validation), or the "
+                        "criticism's own harmonic balance (a fast unit-level check)")  # fmt: skip
 
 
 def bench(records: int, levels: int, hold_s: float) -> dict:

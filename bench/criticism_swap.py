@@ -44,12 +44,14 @@ import time
 from collections import Counter
 
 import numpy as np
-from criticism import NO_FLOOR  # bench/criticism.py, beside this script
+from criticism import (
+    NO_FLOOR,  # bench/criticism.py, beside this script
+    campaign_arguments,
+)
 from criticism import _rate as _interval
 
 from identification.criticism.criticism import SEPARATION, WORSE
 from studies import (
-    HELD_OUT_SEED,
     SWAP_TRUTHS,
     CampaignSource,
     SeedRange,
@@ -107,19 +109,7 @@ def _sweep(right: list[SwapRow], wrong: list[SwapRow]) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--campaigns", type=int, default=200, help="campaigns per side")
-    parser.add_argument(
-        "--seed",
-        type=int,
-        default=HELD_OUT_SEED,
-        help="seed of the campaigns (held out from 1 000 000: studies.seeds)",
-    )
-    parser.add_argument(
-        "--source",
-        choices=[str(s) for s in CampaignSource],
-        default=str(CampaignSource.LAB_RIG),
-        help="where the campaigns come from: the lab rig (validation), or the "
-        "criticism's own harmonic balance (a fast unit-level check)",
-    )
+    campaign_arguments(parser)
     parser.add_argument("--rows", type=str, help="write every row here (JSON lines)")
     parser.add_argument("--from-rows", type=str,
                         help="analyse the rows of an earlier run (with --no-floors for a "

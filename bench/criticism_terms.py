@@ -39,12 +39,14 @@ import time
 from collections import Counter
 
 import numpy as np
-from criticism import _rate  # bench/criticism.py, beside this script
+from criticism import (
+    _rate,  # bench/criticism.py, beside this script
+    campaign_arguments,
+)
 from scipy.stats import ncx2
 
 from identification.criticism.criticism import SEPARATION
 from studies import (
-    HELD_OUT_SEED,
     TERM_TRUTHS,
     CampaignSource,
     SeedRange,
@@ -86,19 +88,7 @@ def _predicted(trials: list[TermTrial]) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--campaigns", type=int, default=44, help="campaigns")
-    parser.add_argument(
-        "--seed",
-        type=int,
-        default=HELD_OUT_SEED,
-        help="seed of the campaigns (held out from 1 000 000: studies.seeds)",
-    )
-    parser.add_argument(
-        "--source",
-        choices=[str(s) for s in CampaignSource],
-        default=str(CampaignSource.LAB_RIG),
-        help="where the campaigns come from: the lab rig (validation), or the "
-        "criticism's own harmonic balance (a fast unit-level check)",
-    )
+    campaign_arguments(parser)
     parser.add_argument("--rows", type=str, help="write every row here (JSON lines)")
     args = parser.parse_args()
     began = time.perf_counter()
