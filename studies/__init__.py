@@ -8,9 +8,9 @@ Outside the library: this package may import ``identification``, ``surrogates`` 
 * :mod:`studies.nulls` — :func:`null_study`: the false-discovery rate of the calibrated
   decision over fast null campaigns.
 * :mod:`studies.swaps` — :func:`swap_study`: how often the swap step undoes a right
-  addition, how often it corrects a wrong one.
+  addition, how often it corrects a wrong one, on lab-rig campaigns.
 * :mod:`studies.term_groups` — :func:`term_group_study`: how often a term of the truth's
-  structure is grouped with a stand-in the data can tell it from.
+  structure is grouped with a stand-in the data can tell it from, on lab-rig campaigns.
 * :mod:`studies.table5` — :func:`table5_study`: the paper's Table 5, surrogate accuracy
   against training size.
 * :mod:`studies.coverage` — :func:`population_coverage`: the calibration of the
@@ -19,11 +19,10 @@ Outside the library: this package may import ``identification``, ``surrogates`` 
 Beside them: :mod:`studies.outcomes` (every study's outcome categories and their rules,
 fixed before it runs; ``docs/studies.md``), :mod:`studies.campaigns` (the campaign
 simulators: the lab rig for validation, the harmonic balance for unit-level checks),
-:mod:`studies.driver`
-(the one campaign driver of the null, swap and term-group studies), :mod:`studies.rows`
-(typed rows written as dicts and tables), :mod:`studies.binomial` (intervals of rates) and
-:mod:`studies.seeds` (the seed convention: tuning seeds below :data:`HELD_OUT_SEED`,
-held-out seeds from it up).
+:mod:`studies.driver` (the one campaign driver of the null, swap and term-group studies),
+:mod:`studies.rows` (typed rows written as dicts and tables, and the loop's end state
+each records), :mod:`studies.binomial` (intervals of rates) and :mod:`studies.seeds` (the
+seed convention: tuning seeds below :data:`HELD_OUT_SEED`, held-out seeds from it up).
 """
 
 from studies.binomial import binomial_bounds, clopper_pearson
