@@ -7,9 +7,11 @@ earlier when a replacement gains more than :data:`~identification.criticism.crit
 SEPARATION` in ``χ²`` (admissible, no channel worse beyond its noise:
 :data:`~identification.criticism.criticism.WORSE`), and removes it when removing it
 costs less than the calibrated threshold. :func:`studies.swap_study` runs it
-over fast harmonic-balance campaigns (the null study's: 1/3/5/10 assemblies, 5–8
-levels, lab conditions each with probability ½) of nine truths, each the lab base model
-plus one effect with a near-collinear rival in the catalogue:
+over lab-rig campaigns (the presets ``lab-hidden-<effect>`` with their mild lab
+artefacts, records simulated and backbones extracted; 1/3/5/10 assemblies, 5–8 levels;
+``--source "harmonic balance"``: the fast harmonic-balance campaigns of the null study,
+the criticism's own model class, a unit-level check only) of nine truths, each the lab
+base model plus one effect with a near-collinear rival in the catalogue:
 
 * **false swaps**: the effect added is the truth's; any change kept is wrong. Target
   ≤ 5 % per decision (the false-discovery target), judged on the upper end of the
@@ -25,6 +27,10 @@ plus one effect with a near-collinear rival in the catalogue:
 * the distribution of the best replacement's gain when the truth's structure is judged:
   the quantity SEPARATION bounds.
 
+Each row records the end state (the model after the swap step, its verdict and
+p-value). The study seed is held out by default (:mod:`studies.seeds`; the power side
+runs on the next seed); the JSON line names the seeds and the source.
+
 Run: ``.venv/bin/python bench/criticism_swap.py --campaigns 200`` (``--no-floors``:
 systematic floors all but off; ``--side``: one side only; ``--from-rows``: analyse stored
 rows). Prints the rows, the rates, the margin swept over the same trials (each trial's
@@ -38,11 +44,21 @@ import time
 from collections import Counter
 
 import numpy as np
-from criticism import NO_FLOOR  # bench/criticism.py, beside this script
+from criticism import (
+    NO_FLOOR,  # bench/criticism.py, beside this script
+    campaign_arguments,
+)
 from criticism import _rate as _interval
 
 from identification.criticism.criticism import SEPARATION, WORSE
-from studies import SWAP_TRUTHS, SwapRow, rows_table, swap_study
+from studies import (
+    SWAP_TRUTHS,
+    CampaignSource,
+    SeedRange,
+    SwapRow,
+    rows_table,
+    swap_study,
+)
 
 TARGET_RATE = 0.05
 COLUMNS = (
@@ -56,11 +72,12 @@ def _rate(name: str, k: int, n: int) -> dict:
     return _interval(name, k, n) | {"rate": k / n if n else None}
 
 
-def _run(campaigns: int, seed: int, wrong_first: bool, options: dict) -> list[SwapRow]:
+def _run(campaigns: int, seed: int, wrong_first: bool, source: str, options: dict) -> list[SwapRow]:
     def progress(row: SwapRow) -> None:
         print(rows_table([row], COLUMNS).splitlines()[-1], flush=True)
 
-    rows = swap_study(campaigns, wrong_first=wrong_first, seed=seed, progress=progress, **options)
+    rows = swap_study(campaigns, wrong_first=wrong_first, seed=seed, progress=progress,
+                      source=CampaignSource(source), **options)  # fmt: skip
     print(rows_table(rows, COLUMNS))
     return rows
 
@@ -92,7 +109,7 @@ def _sweep(right: list[SwapRow], wrong: list[SwapRow]) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--campaigns", type=int, default=200, help="campaigns per side")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the campaigns")
+    campaign_arguments(parser)
     parser.add_argument("--rows", type=str, help="write every row here (JSON lines)")
     parser.add_argument("--from-rows", type=str,
                         help="analyse the rows of an earlier run (with --no-floors for a "
@@ -111,8 +128,16 @@ def main() -> None:
         right = [r for r in rows if not r.wrong_first]
         wrong = [r for r in rows if r.wrong_first]
     else:
-        right = _run(args.campaigns, args.seed, False, options) if args.side != "power" else []
-        wrong = _run(args.campaigns, args.seed + 1, True, options) if args.side != "false" else []
+        right = (
+            _run(args.campaigns, args.seed, False, args.source, options)
+            if args.side != "power"
+            else []
+        )
+        wrong = (
+            _run(args.campaigns, args.seed + 1, True, args.source, options)
+            if args.side != "false"
+            else []
+        )
     total_s = time.perf_counter() - began
     if args.rows:
         with open(args.rows, "w") as out:
@@ -221,6 +246,8 @@ def main() -> None:
         "benchmark": "criticism_swap_calibration",
         "campaigns_per_side": max(len(right), len(wrong)),
         "seed": args.seed,
+        "seeds": SeedRange(args.seed, 2).to_dict(),
+        "source": (right + wrong)[0].source if right + wrong else None,
         "from_rows": args.from_rows,
         "systematic_floors": not args.no_floors,
         "truths": list(SWAP_TRUTHS),

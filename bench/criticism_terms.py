@@ -6,9 +6,12 @@ says that a term the data need could be a catalogue effect the model lacks: that
 refitted in the term's place, fits no worse than
 :data:`~identification.criticism.criticism.SEPARATION` below the model, is admissible and
 makes no channel worse beyond its noise. :func:`studies.term_group_study` runs it
-over fast harmonic-balance campaigns (the null study's: 1/3/5/10 assemblies, 5–8 levels,
-lab conditions each with probability ½) of eleven truths, each the lab base model plus one
-effect with near-collinear catalogue rivals, criticised with the truth's own structure.
+over lab-rig campaigns (the presets ``lab-hidden-<effect>`` with their mild lab
+artefacts, records simulated and backbones extracted; 1/3/5/10 assemblies, 5–8 levels;
+``--source "harmonic balance"``: the null study's fast harmonic-balance campaigns, the
+criticism's own model class, a unit-level check only) of eleven truths, each the lab base
+model plus one effect with near-collinear catalogue rivals, criticised with the truth's
+own structure.
 
 Every trial (a term of the truth, a stand-in the prescreen picked) gets its separation at
 the design, ``λ``: the stand-in refitted to the noise-free truth in the campaign's own
@@ -21,6 +24,10 @@ where ``λ`` < SEPARATION (the statement is then right); the group sizes; and th
 of the campaigns (each a null campaign for its truth's structure: groups do not alter
 them, nothing may be proposed).
 
+Each trial's category is :class:`studies.TermTrialOutcome` (fixed in ``docs/studies.md``).
+The study seed is held out by default (:mod:`studies.seeds`); the JSON line names it and
+the source.
+
 Run: ``.venv/bin/python bench/criticism_terms.py --campaigns 44``. Prints the trials,
 the rates, then one JSON line.
 """
@@ -32,11 +39,23 @@ import time
 from collections import Counter
 
 import numpy as np
-from criticism import _rate  # bench/criticism.py, beside this script
+from criticism import (
+    _rate,  # bench/criticism.py, beside this script
+    campaign_arguments,
+)
 from scipy.stats import ncx2
 
 from identification.criticism.criticism import SEPARATION
-from studies import TERM_TRUTHS, TermGroupRow, TermTrial, rows_table, term_group_study
+from studies import (
+    TERM_TRUTHS,
+    CampaignSource,
+    SeedRange,
+    TermGroupRow,
+    TermTrial,
+    TermTrialOutcome,
+    rows_table,
+    term_group_study,
+)
 
 COLUMNS = ("campaign", "truth", "n_curves", "term", "effect", "delta_chi2", "lambda", "standing",
            "why")  # fmt: skip
@@ -69,7 +88,7 @@ def _predicted(trials: list[TermTrial]) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--campaigns", type=int, default=44, help="campaigns")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the campaigns")
+    campaign_arguments(parser)
     parser.add_argument("--rows", type=str, help="write every row here (JSON lines)")
     args = parser.parse_args()
     began = time.perf_counter()
@@ -81,7 +100,9 @@ def main() -> None:
         line += f"{row.verdict}, {len(trials)} trials, groups {groups}, "
         print(line + f"{row.seconds:.1f} s", flush=True)
 
-    rows = term_group_study(args.campaigns, seed=args.seed, progress=progress)
+    rows = term_group_study(
+        args.campaigns, seed=args.seed, progress=progress, source=CampaignSource(args.source)
+    )
     total_s = time.perf_counter() - began
     if args.rows:
         with open(args.rows, "w") as out:
@@ -91,9 +112,10 @@ def main() -> None:
     trials = [t for _, t in _trials(rows)]
     separable = [t for t in trials if t.design_lambda >= SEPARATION]
     close = [t for t in trials if t.design_lambda < SEPARATION]
+    outcomes = Counter(str(t.outcome) for t in trials)
     print(f"\n{len(trials)} stand-in trials in {len(rows)} campaigns; separation at the design "
           f"λ ≥ {SEPARATION} (the data can tell them apart) in {len(separable)}")  # fmt: skip
-    flagged = sum(t.standing for t in separable)
+    flagged = outcomes[TermTrialOutcome.FALSE_FLAG]
     figures = {
         "false_flags": _rate(
             "false flags: grouped although λ ≥ SEPARATION", flagged, len(separable)
@@ -110,7 +132,7 @@ def main() -> None:
         }
         print(f"    Δχ² rule alone (noncentral χ²₁): {100 * _predicted(some):.1f} %")
     right = "grouped where λ < SEPARATION (the data cannot tell them apart: the statement is right)"
-    figures["grouped_when_close"] = _rate(right, sum(t.standing for t in close), len(close))
+    figures["grouped_when_close"] = _rate(right, outcomes[TermTrialOutcome.RIGHT_GROUP], len(close))
     vetoed_close = sum(bool(t.why) for t in close)
     print(f"  of those not grouped: {vetoed_close} inadmissible or a channel worse")
     # The term swap's false replacements (Criticism.swap_term): a stand-in the data prefer to
@@ -133,6 +155,9 @@ def main() -> None:
         "benchmark": "criticism_term_groups",
         "campaigns": len(rows),
         "seed": args.seed,
+        "seeds": SeedRange(args.seed, 1).to_dict(),
+        "source": args.source,
+        "trial_outcomes": dict(outcomes),
         "truths": list(TERM_TRUTHS),
         "separation": SEPARATION,
         "trials": len(trials),

@@ -187,6 +187,13 @@ def _counted(entry: dict) -> str:
     )
 
 
+def _seeds(seeds: int | dict) -> str:
+    """A study's seeds as its JSON line names them (a count, before studies.seeds)."""
+    if isinstance(seeds, int):
+        return f"{seeds} seeds"
+    return f"{seeds['kind']} seeds {seeds['first']}–{seeds['last']}"
+
+
 def criticism_studies(results: dict[str, dict]) -> str:
     """The hidden-effect study's outcomes and the model-term groups' false-flag rate."""
     lines = []
@@ -194,10 +201,10 @@ def criticism_studies(results: dict[str, dict]) -> str:
     if hidden and "hidden_outcomes" in hidden:
         outcomes = ", ".join(f"{n} {o}" for o, n in hidden["hidden_outcomes"].items())
         lines.append(
-            f"- Hidden catalogue effects ({hidden['seeds']} seeds, starts "
+            f"- Hidden catalogue effects ({_seeds(hidden['seeds'])}, starts "
             f"{', '.join(hidden['starts'])}): {outcomes}; found (first, in a flagged group or "
-            f"in a model-term group of the start) with the key error down ≥ 80 %: "
-            f"{_counted(hidden['hidden_hits'])} of the rows judged"
+            f"held by the loop's final model) with the key error down ≥ 80 %: "
+            f"{_counted(hidden['hidden_hits'])} of the hidden rows"
         )
         sizes = hidden.get("group_sizes")
         if sizes:

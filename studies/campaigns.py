@@ -1,7 +1,17 @@
-"""Campaign simulators of the studies: fast harmonic-balance campaigns with lab conditions
-(:func:`simulated_campaign`, and :func:`draw_lab_campaign`, the null, swap and term-group
-studies' draw of them), a population's single-harmonic campaign
-(:func:`synthetic_campaign`) and the PLL simulator's (:func:`pll_campaign`)."""
+"""Campaign simulators of the studies.
+
+* :func:`rig_campaign` (and :func:`draw_rig_campaign`, the campaign driver's draw of it): a
+  rig preset's records — the PLL simulator through the preset's lab conditions, time
+  integration with every harmonic — and the backbones extracted from them. The data of
+  every validation study.
+* :func:`simulated_campaign` (and :func:`draw_lab_campaign`): fast multi-harmonic-balance
+  backbones with lab conditions. The criticism predicts with the same harmonic balance, so
+  these are unit-level checks of the statistics (fast, the model class exact), never a
+  validation study's data.
+* :func:`synthetic_campaign` (a population's single-harmonic campaign) and
+  :func:`pll_campaign` (the PLL simulator's backbones of a population), for the updating
+  studies.
+"""
 
 from __future__ import annotations
 
@@ -16,12 +26,19 @@ from identification.analytical.pll import pll_backbones
 from identification.effects import LINEAR_STIFFNESS, VISCOUS_DAMPING
 from identification.effects.microslip import EFFECT as MICROSLIP
 from identification.measurements.backbone import Backbone, BackboneSet
+from identification.measurements.extraction import extract_backbones
+from identification.measurements.records import Record
 from identification.model import JointModel
+from identification.rig import RIG_PRESETS, rig_for_preset
 
 __all__ = [
     "NULL_CONDITIONS",
+    "RIG_LEVEL_CHOICES",
     "draw_lab_campaign",
+    "draw_rig_campaign",
+    "lab_conditions",
     "pll_campaign",
+    "rig_campaign",
     "simulated_campaign",
     "synthetic_campaign",
 ]
@@ -181,6 +198,82 @@ def draw_lab_campaign(
         truth, n_curves, seed=seed * 100_003 + k, levels=n_levels, **conditions
     )
     return present, n_levels, measured
+
+
+#: Levels per branch a driven rig campaign draws from (as :func:`draw_lab_campaign` does).
+RIG_LEVEL_CHOICES = (5, 6, 8)
+#: Entries of a lab preset's settings that are physics, not conditions of the lab.
+_PHYSICS = ("joints", "second_mode")
+
+
+def rig_campaign(
+    preset: str, n_curves: int, seed: Sequence[int], *, levels: int, hold_s: float = 2.5
+) -> tuple[list[Record], BackboneSet]:
+    """A campaign of ``n_curves`` assemblies on the rig of ``preset``, kept in memory.
+
+    The rig (:func:`identification.rig.rig_for_preset`: the lab rig for ``lab-*``
+    presets, with their artefacts) draws each assembly and its noise as
+    :meth:`~identification.rig.Rig.write_campaign` does, assembly ``a`` (from 1) from the
+    seeds ``[*seed, a]`` and ``[*seed, a, 1]``; the backbones are extracted from the
+    records as a user's would be.
+
+    Parameters
+    ----------
+    preset
+        A rig preset (:data:`~identification.rig.RIG_PRESETS`).
+    n_curves
+        Assemblies (records).
+    seed
+        The seed sequence every assembly's seeds start with.
+    levels
+        Hold phases per record (per branch for an up-down schedule).
+    hold_s
+        Seconds of each hold.
+
+    Returns
+    -------
+    records : list of Record
+        One record per assembly.
+    measured : BackboneSet
+        Their backbones.
+    """
+    rig = rig_for_preset(preset, levels=levels, hold_s=hold_s)
+    records = []
+    for a in range(1, n_curves + 1):
+        drawn, gain = rig.draw(np.random.default_rng([*seed, a]))
+        name = f"Config{rig.config}_PRT_Assemb{a}"
+        records.append(rig.simulate(drawn, gain, np.random.default_rng([*seed, a, 1]), name))
+    return records, extract_backbones(records)
+
+
+def lab_conditions(preset: str) -> tuple[str, ...]:
+    """The lab conditions a preset sets (its :class:`~identification.rig.lab.LabRig`
+    settings other than the physics); empty for the ideal rig's presets."""
+    lab = RIG_PRESETS[preset].lab or {}
+    return tuple(k for k, v in lab.items() if v and k not in _PHYSICS)
+
+
+def draw_rig_campaign(
+    preset: str, n_curves: int, seed: int, k: int
+) -> tuple[tuple[str, ...], int, BackboneSet]:
+    """Campaign ``k`` of a study seeded ``seed`` on the rig of ``preset``.
+
+    Its levels per branch are drawn from :data:`RIG_LEVEL_CHOICES` (seed ``[seed, k, 7]``,
+    as :func:`draw_lab_campaign` draws them); its assemblies from ``[seed, k, a]``
+    (:func:`rig_campaign`).
+
+    Returns
+    -------
+    conditions : tuple of str
+        The preset's lab conditions (:func:`lab_conditions`).
+    n_levels : int
+        Levels per branch.
+    measured : BackboneSet
+        The campaign's backbones.
+    """
+    n_levels = int(np.random.default_rng([seed, k, 7]).choice(RIG_LEVEL_CHOICES))
+    _, measured = rig_campaign(preset, n_curves, (seed, k), levels=n_levels)
+    return lab_conditions(preset), n_levels, measured
 
 
 def synthetic_campaign(

@@ -2,7 +2,10 @@
 over truths and curve counts, one typed row each, timed, handed to a progress callback.
 
 A study gives the driver its truths (named by what the rig's preset is called), a judge
-that turns one :class:`Campaign` into a row, and gets the rows back in campaign order.
+that turns one :class:`Campaign` into a row, the source of its data
+(:class:`CampaignSource`), and gets the rows back in campaign order. Each row records the
+study's seed and the source, so a reader can tell held-out figures
+(:mod:`studies.seeds`) and rig data from the rest.
 """
 
 from __future__ import annotations
@@ -11,19 +14,21 @@ import dataclasses
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Any, ClassVar, Self
 
 from identification.criticism.config import Verdict
 from identification.measurements.backbone import BackboneSet
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS
-from studies.campaigns import draw_lab_campaign
+from studies.campaigns import draw_lab_campaign, draw_rig_campaign
 from studies.rows import Row
 
 __all__ = [
     "QUIET_VERDICTS",
     "Campaign",
     "CampaignRow",
+    "CampaignSource",
     "is_discovery",
     "run_campaigns",
 ]
@@ -36,6 +41,23 @@ QUIET_VERDICTS = (Verdict.NOTHING_MISSING, Verdict.DRIFT)
 def is_discovery(verdict: str) -> bool:
     """Whether a criticism's verdict proposes something (not one of :data:`QUIET_VERDICTS`)."""
     return verdict not in QUIET_VERDICTS
+
+
+class CampaignSource(StrEnum):
+    """Where a driven study's campaigns come from.
+
+    * ``LAB_RIG`` — the rig preset's records (the PLL simulator through the preset's lab
+      conditions: time integration, every harmonic) and the backbones extracted from them
+      (:func:`~studies.campaigns.draw_rig_campaign`). The source of every validation
+      study.
+    * ``HARMONIC_BALANCE`` — fast multi-harmonic-balance backbones with drawn lab
+      conditions (:func:`~studies.campaigns.draw_lab_campaign`): the harmonic balance the
+      criticism predicts with, so a unit-level check of the statistics, never a
+      validation figure.
+    """
+
+    LAB_RIG = "lab rig"
+    HARMONIC_BALANCE = "harmonic balance"
 
 
 @dataclass(frozen=True)
@@ -55,9 +77,14 @@ class Campaign:
     n_levels
         Levels per branch.
     conditions
-        The lab conditions present (:data:`~studies.campaigns.NULL_CONDITIONS`).
+        The lab conditions present (:data:`~studies.campaigns.NULL_CONDITIONS`, or the rig
+        preset's: :func:`~studies.campaigns.lab_conditions`).
     measured
         The simulated campaign.
+    seed
+        The study's seed.
+    source
+        Where the campaign comes from.
     """
 
     index: int
@@ -67,6 +94,8 @@ class Campaign:
     n_levels: int
     conditions: tuple[str, ...]
     measured: BackboneSet
+    seed: int
+    source: CampaignSource
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -74,7 +103,9 @@ class CampaignRow(Row):
     """The fields every campaign row starts with; each study's row adds its own.
 
     ``seconds`` is the campaign's time from its simulation to its row, set by
-    :func:`run_campaigns`.
+    :func:`run_campaigns`. ``seed`` (the study's) and ``source`` (a
+    :class:`CampaignSource` value) take, on a row written before they existed, None and
+    the harmonic balance (the only source then).
     """
 
     campaign: int
@@ -83,6 +114,8 @@ class CampaignRow(Row):
     n_levels: int
     conditions: tuple[str, ...]
     seconds: float = float("nan")
+    seed: int | None = None
+    source: str = CampaignSource.HARMONIC_BALANCE
 
     _JSON_KEYS: ClassVar[Mapping[str, str]] = {"n_levels": "levels"}
 
@@ -95,6 +128,8 @@ class CampaignRow(Row):
             n_curves=campaign.n_curves,
             n_levels=campaign.n_levels,
             conditions=campaign.conditions,
+            seed=campaign.seed,
+            source=str(campaign.source),
             **fields,
         )
 
@@ -107,13 +142,16 @@ def run_campaigns[R: CampaignRow](
     preset: Callable[[str], str],
     judge: Callable[[Campaign], R],
     progress: Callable[[R], None] | None = None,
+    source: CampaignSource = CampaignSource.HARMONIC_BALANCE,
 ) -> list[R]:
     """Draw ``campaigns`` lab campaigns and judge each.
 
     Truths are taken in turn, curve counts in turn per round of truths; each campaign
-    draws its lab conditions and its levels from its own seed
-    (:func:`~studies.campaigns.draw_lab_campaign`), so a run of any length mixes clean
-    and artefact-laden campaigns over every truth and curve count.
+    draws its levels (and, from the harmonic balance, its lab conditions) from its own
+    seed, so a run of any length mixes campaigns over every truth and curve count. From
+    the lab rig (:func:`~studies.campaigns.draw_rig_campaign`) the conditions are the
+    preset's; from the harmonic balance (:func:`~studies.campaigns.draw_lab_campaign`)
+    each of :data:`~studies.campaigns.NULL_CONDITIONS` is present with probability ½.
 
     Parameters
     ----------
@@ -131,20 +169,26 @@ def run_campaigns[R: CampaignRow](
         The study's judgement of one campaign: its row (``seconds`` is set here).
     progress
         Called with each row as it is done.
+    source
+        Where the campaigns come from.
 
     Returns
     -------
     list
         The rows, in campaign order.
     """
+    source = CampaignSource(source)
     rows = []
     for k in range(campaigns):
         name = truths[k % len(truths)]
         n_curves = curve_counts[(k // len(truths)) % len(curve_counts)]
         truth = RIG_PRESETS[preset(name)].model
         began = time.perf_counter()
-        conditions, n_levels, measured = draw_lab_campaign(truth, n_curves, seed, k)
-        campaign = Campaign(k, name, truth, n_curves, n_levels, conditions, measured)
+        if source is CampaignSource.LAB_RIG:
+            conditions, n_levels, measured = draw_rig_campaign(preset(name), n_curves, seed, k)
+        else:
+            conditions, n_levels, measured = draw_lab_campaign(truth, n_curves, seed, k)
+        campaign = Campaign(k, name, truth, n_curves, n_levels, conditions, measured, seed, source)
         row = dataclasses.replace(judge(campaign), seconds=time.perf_counter() - began)
         rows.append(row)
         if progress is not None:

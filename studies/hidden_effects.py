@@ -1,6 +1,11 @@
 """The hidden-effect study: a rig scenario (ideal or lab) through the criticism loop, from the
 start a user has — the bare linear model, a SINDy-identified one, or the preset's base model
-(the truth minus what is hidden) — and whether the loop finds what the rig hid."""
+(the truth minus what is hidden) — and whether the loop finds what the rig hid.
+
+Its outcome categories and their rules are :class:`~studies.outcomes.HiddenOutcome` (a
+scenario that hides effects), :class:`~studies.outcomes.NullOutcome` (nothing hidden) and
+:class:`~studies.outcomes.OutsideOutcome` (physics out of the catalogue), each judged on
+the loop's end state; ``docs/studies.md`` gives them in words."""
 
 from __future__ import annotations
 
@@ -18,12 +23,15 @@ from identification.effects import CATALOGUE, LINEAR_STIFFNESS, VISCOUS_DAMPING
 from identification.fitting.fitter import Fitter
 from identification.fitting.least_squares import FitResult
 from identification.measurements.backbone import BackboneSet
-from identification.measurements.extraction import extract_backbones
 from identification.measurements.records import Record
 from identification.model import JointModel
-from identification.rig import RIG_PRESETS, rig_for_preset
+from identification.rig import RIG_PRESETS
 from identification.rig.presets import LAB_OUT_OF_CATALOGUE_SCENARIOS
+from studies.campaigns import rig_campaign
 from studies.driver import is_discovery
+from studies.outcomes import HiddenOutcome, NullOutcome, OutsideOutcome
+from studies.rows import EndState
+from studies.seeds import is_held_out
 
 __all__ = [
     "KEY_CHANNEL",
@@ -118,6 +126,11 @@ class StudyResult:
         """The first criticism's verdict."""
         return self.criticisms[0].verdict
 
+    @property
+    def end_state(self) -> EndState:
+        """Where the loop ended: its last model, verdict and p-value."""
+        return EndState.of(self.criticisms[-1])
+
     def _round_of(self, effect: str) -> int | None:
         """The first round whose proposed effect or group holds ``effect``."""
         for k, crit in enumerate(self.criticisms):
@@ -163,10 +176,11 @@ class StudyResult:
 
     @property
     def false_discovery(self) -> bool | None:
-        """Null scenarios: the first criticism says something is missing (None otherwise)."""
+        """Null scenarios: the first criticism says something is missing, or the loop added
+        an effect (None otherwise)."""
         if self.kind != "null":
             return None
-        return is_discovery(self.verdict)
+        return is_discovery(self.verdict) or bool(self.added)
 
     @property
     def start_adequate(self) -> bool:
@@ -256,47 +270,70 @@ class StudyResult:
         return None if before is None or after is None else float(1 - after / before)
 
     @property
-    def outcome(self) -> str | None:
-        """Hidden scenarios: ``"hit"`` (:attr:`passed`, the start lacking the effect),
-        ``"hit (start term swapped)"`` (a start-adequate row whose start term is grouped with
-        the hidden effect, :attr:`term_group`, :attr:`passed`, and the loop's swap step put
-        the effect in its place: :attr:`hit`), ``"hit (start term group)"`` (the same, the
-        data not preferring the effect to the term), ``"start adequate"``
-        (:attr:`start_adequate`, otherwise) or ``"miss"``; None for other kinds."""
-        if self.kind != "hidden":
-            return None
-        if self.start_adequate:
-            if not self.passed:
-                return "start adequate"
-            return "hit (start term swapped)" if self.hit else "hit (start term group)"
-        return "hit" if self.passed else "miss"
+    def _term_stands_in(self) -> bool:
+        """Start-adequate rows: a model-term group of the start holds the hidden effect
+        (:attr:`term_group`) and the effect in place of that term takes the key channel's
+        error down ≥ 80 % from the bare linear model's (:meth:`term_reduction`)."""
+        if self.term_group is None:
+            return False
+        key = self.term_reduction(KEY_CHANNEL[self.scenario])
+        return key is not None and key >= 0.8
 
-    @property
-    def passed(self) -> bool | None:
-        """Null: nothing found. Hidden: :attr:`hit` (or already in the start) and the key
-        channel's error down ≥ 80 %; when the start holds every hidden effect already, the
-        loop adds only effects of the truth (SINDy may miss another one, e.g. the viscous
-        term beside ẋ³) and ends with nothing significant. When the start is adequate
-        without it (:attr:`start_adequate`): the first criticism's model-term groups hold it
-        (:attr:`term_group`) and the key channel's error with it in place of the start's
-        term is down ≥ 80 % from the bare linear model's (:meth:`term_reduction`); None
-        (not judged) when no group holds it. Out of catalogue: "not explained by the
-        catalogue" or "partly explained" (proposals are admissible by construction)."""
-        if self.kind == "null":
-            return not self.false_discovery
-        if self.kind == "out of catalogue":
-            return self.verdict in ("not explained by the catalogue", "partly explained")
-        if self.start_adequate:
-            if self.term_group is None:
-                return None
-            key = self.term_reduction(KEY_CHANNEL[self.scenario])
-            return key is not None and key >= 0.8
+    def _found(self) -> bool:
+        """The hit rule of :class:`~studies.outcomes.HiddenOutcome` for a start that is not
+        adequate without the effect."""
         if self.in_start:
             return all(e in self.truth for e in self.added) and not (
                 self.criticisms[-1].significant
             )
         key = self.reduction(KEY_CHANNEL[self.scenario])
         return bool(self.hit) and key is not None and key >= 0.8
+
+    @property
+    def outcome(self) -> HiddenOutcome | NullOutcome | OutsideOutcome:
+        """The row's category, by its kind's rule (:mod:`studies.outcomes`): a
+        :class:`~studies.outcomes.HiddenOutcome` where effects are hidden, a
+        :class:`~studies.outcomes.NullOutcome` where nothing is, an
+        :class:`~studies.outcomes.OutsideOutcome` out of the catalogue."""
+        if self.kind == "null":
+            return NullOutcome.FALSE_DISCOVERY if self.false_discovery else NullOutcome.QUIET
+        if self.kind == "out of catalogue":
+            return self._outside_outcome()
+        if self.start_adequate:
+            if not self._term_stands_in:
+                return HiddenOutcome.START_ADEQUATE
+            return HiddenOutcome.TERM_SWAPPED if self.hit else HiddenOutcome.TERM_GROUP
+        return HiddenOutcome.HIT if self._found() else HiddenOutcome.MISS
+
+    def _outside_outcome(self) -> OutsideOutcome:
+        if any(c.verdict == "explained" for c in self.criticisms):
+            return OutsideOutcome.EXPLAINED
+        final = self.criticisms[-1].verdict
+        if final == "not explained by the catalogue":
+            return OutsideOutcome.NOT_EXPLAINED
+        if final == "partly explained":
+            return OutsideOutcome.PARTLY_EXPLAINED
+        return OutsideOutcome.QUIET_AT_END
+
+    @property
+    def passed(self) -> bool | None:
+        """The row's pass rule on the loop's end state (:mod:`studies.outcomes`). Null:
+        quiet (nothing proposed, nothing added). Hidden: a hit
+        (:attr:`~studies.outcomes.HiddenOutcome.is_hit`); a miss fails; a start adequate
+        without the effect (:attr:`~studies.outcomes.HiddenOutcome.TERM_GROUP`,
+        :attr:`~studies.outcomes.HiddenOutcome.START_ADEQUATE`) is not judged (None): the
+        effect is not missing from that start, yet it was not found either, so the hit
+        rate counts the row in its denominator and never in its numerator. Out of
+        catalogue: the loop ends "not explained by the catalogue" or "partly explained",
+        and no round said "explained"."""
+        outcome = self.outcome
+        if isinstance(outcome, NullOutcome):
+            return outcome is NullOutcome.QUIET
+        if isinstance(outcome, OutsideOutcome):
+            return outcome.said_unexplained
+        if outcome in (HiddenOutcome.TERM_GROUP, HiddenOutcome.START_ADEQUATE):
+            return None
+        return outcome.is_hit
 
     def row(self) -> dict[str, Any]:
         """Table row of the study."""
@@ -341,7 +378,9 @@ class StudyResult:
             "key_channel": KEY_CHANNEL.get(self.scenario),
             "drift": [d.channel for d in first.drift if d.significant],
             "passed": self.passed,
-            "outcome": self.outcome,
+            "outcome": str(self.outcome),
+            "end_state": self.end_state.to_dict(),
+            "seed_kind": "held-out" if is_held_out(self.seed) else "tuning",
             "seconds": self.seconds,
         }
 
@@ -377,9 +416,9 @@ def criticism_study(
 ) -> StudyResult:
     """Run a rig scenario through the loop: criticise the start model, add, repeat.
 
-    The rig (:func:`identification.rig.rig_for_preset`, ideal or lab) draws
-    ``assemblies`` assemblies and their noise as :meth:`~identification.rig.Rig.write_campaign`
-    does (seeds ``[seed, a]`` and ``[seed, a, 1]``) but keeps the records in memory. The
+    The rig (:func:`~studies.campaigns.rig_campaign`, ideal or lab) draws ``assemblies``
+    assemblies and their noise as :meth:`~identification.rig.Rig.write_campaign` does
+    (seeds ``[seed, a]`` and ``[seed, a, 1]``) but keeps the records in memory. The
     start is fitted to the backbones alone (frequency and damping, as a user's first fit
     is; SINDy's own coefficients for ``"sindy"``); the criticism uses the harmonics the
     backbones carry too. The loop is forward-backward stepwise
@@ -392,7 +431,8 @@ def criticism_study(
     scenario
         A rig preset (:data:`~identification.rig.RIG_PRESETS`).
     seed
-        Seed of the assemblies and their noise.
+        Seed of the assemblies and their noise (:mod:`studies.seeds`: a reported figure
+        comes from held-out seeds, ``≥ HELD_OUT_SEED``).
     start
         ``"base"``: the preset's base model, the truth minus what is hidden;
         ``"linear"``: the bare linear-viscous model; ``"sindy"``: SINDy on the first three
@@ -414,13 +454,7 @@ def criticism_study(
         The scenario's run, its criticisms one per round.
     """
     began = time.perf_counter()
-    rig = rig_for_preset(scenario, levels=levels, hold_s=hold_s)
-    records = []
-    for a in range(1, assemblies + 1):
-        drawn, gain = rig.draw(np.random.default_rng([seed, a]))
-        name = f"Config{rig.config}_PRT_Assemb{a}"
-        records.append(rig.simulate(drawn, gain, np.random.default_rng([seed, a, 1]), name))
-    measured = extract_backbones(records)
+    records, measured = rig_campaign(scenario, assemblies, (seed,), levels=levels, hold_s=hold_s)
     preset = RIG_PRESETS[scenario]
     model = _start_model(start, scenario, records, measured)
     result = StudyResult(

@@ -1,12 +1,17 @@
-"""Typed study rows and how they are written out: plain dicts (JSON lines) and text tables."""
+"""Typed study rows and how they are written out: plain dicts (JSON lines) and text tables;
+the loop's end state every study row records (:class:`EndState`)."""
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
-from typing import Any, ClassVar
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar, Self
 
-__all__ = ["Row", "rows_table"]
+if TYPE_CHECKING:
+    from identification.criticism.criticism import Criticism
+
+__all__ = ["EndState", "Row", "rows_table"]
 
 
 class Row:
@@ -24,6 +29,40 @@ class Row:
             self._JSON_KEYS.get(f.name, f.name): _plain(getattr(self, f.name))
             for f in dataclasses.fields(self)  # type: ignore[arg-type]
         }
+
+
+@dataclass(frozen=True)
+class EndState(Row):
+    """Where a study's criticism loop ended: its last model, refitted, and that model's
+    verdict and p-value (not only round 1's).
+
+    Attributes
+    ----------
+    model
+        The last model's equation, its coefficients refitted to the campaign.
+    verdict
+        Its criticism's verdict.
+    p_value
+        Its criticism's p-value.
+    effects
+        The effects the last model holds.
+    """
+
+    model: str
+    verdict: str
+    p_value: float
+    effects: tuple[str, ...]
+
+    @classmethod
+    def of(cls, crit: Criticism) -> Self:
+        """The end state of a loop whose last criticism is ``crit``."""
+        model = crit.base.model
+        return cls(model.equation(), str(crit.verdict), float(crit.p_value), tuple(model.effects))
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Self:
+        """An end state as :meth:`to_dict` wrote it."""
+        return cls(data["model"], data["verdict"], data["p_value"], tuple(data["effects"]))
 
 
 def _plain(value: Any) -> Any:

@@ -1,5 +1,6 @@
 """The swap study: how often the stepwise loop's swap step undoes a right addition, and how
-often it corrects a wrong one, over fast lab campaigns."""
+often it corrects a wrong one, over lab-rig campaigns (by default; fast harmonic-balance
+campaigns as a unit-level check)."""
 
 from __future__ import annotations
 
@@ -21,8 +22,9 @@ from identification.effects import (
     van_der_pol,
 )
 from identification.rig.presets import lab_hidden_scenario
-from studies.driver import Campaign, CampaignRow, run_campaigns
-from studies.rows import Row
+from studies.driver import Campaign, CampaignRow, CampaignSource, run_campaigns
+from studies.outcomes import SwapOutcome
+from studies.rows import EndState, Row
 
 __all__ = ["SWAP_TRUTHS", "SwapRow", "SwapTrial", "swap_study"]
 
@@ -101,6 +103,9 @@ class SwapRow(CampaignRow):
         The power side: ``B`` put in place of the rival (None on the other side).
     swap_veto
         The swap's trial of ``B`` was flagged worse in a channel (None: no such trial).
+    end_state
+        The model after the swap step, refitted, with its criticism's verdict and p-value
+        (round 1's when nothing was added; None on a row written before it existed).
     """
 
     wrong_first: bool
@@ -116,6 +121,16 @@ class SwapRow(CampaignRow):
     false_swap: bool | None = None
     corrected: bool | None = None
     swap_veto: bool | None = None
+    end_state: EndState | None = None
+
+    @property
+    def outcome(self) -> SwapOutcome:
+        """The decision's category (:class:`~studies.outcomes.SwapOutcome`)."""
+        if self.decision is None:
+            return SwapOutcome.NO_DECISION
+        if self.decision.startswith("replaced"):
+            return SwapOutcome.REPLACED
+        return SwapOutcome(self.decision)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Self:
@@ -132,6 +147,8 @@ class SwapRow(CampaignRow):
             values["groups"] = tuple(tuple(g) for g in values["groups"])
         if values.get("trials") is not None:
             values["trials"] = tuple(SwapTrial.of(t) for t in values["trials"])
+        if values.get("end_state") is not None:
+            values["end_state"] = EndState.from_dict(values["end_state"])
         return cls(**values)
 
 
@@ -143,11 +160,12 @@ def swap_study(
     curve_counts: Sequence[int] = (1, 3, 5, 10),
     seed: int = 0,
     progress: Callable[[SwapRow], None] | None = None,
+    source: CampaignSource = CampaignSource.LAB_RIG,
     **options: Any,
 ) -> list[SwapRow]:
     """The swap step's decisions (:meth:`~identification.criticism.criticism.Criticism.swap`)
-    over ``campaigns`` fast campaigns (truths and curve counts in turn, lab conditions as
-    :func:`~studies.driver.run_campaigns` draws them).
+    over ``campaigns`` campaigns (truths and curve counts in turn, drawn by
+    :func:`~studies.driver.run_campaigns` from ``source``: the lab rig by default).
 
     Each campaign's truth is the lab base model plus one effect ``B`` (the preset
     ``lab-hidden-<B>``). Round 1 criticises the truth without ``B``; its significant
@@ -184,6 +202,9 @@ def swap_study(
         Seed of the study.
     progress
         Called with each row as it is done.
+    source
+        Where the campaigns come from (:class:`~studies.driver.CampaignSource`): the lab
+        rig; the harmonic balance only as a fast unit-level check.
     **options
         Passed to :func:`identification.criticism.criticism.criticize`.
 
@@ -213,7 +234,7 @@ def swap_study(
             added_was_proposed=added in proposed,
         )
         if added is None:
-            return row
+            return dataclasses.replace(row, end_state=EndState.of(first))
         alternatives = first.alternatives(added)
         swapped = first.add(added).swap({added: alternatives}, last="")
         trials = tuple(SwapTrial.of(t) for t in swapped.swaps)
@@ -230,8 +251,9 @@ def swap_study(
             false_swap=None if wrong_first else change is not None,
             corrected=(change is not None and change.add == effect) if wrong_first else None,
             swap_veto=("worse" in truth_trial[0].why) if truth_trial else None,
+            end_state=EndState.of(swapped),
         )
 
     return run_campaigns(
-        campaigns, truths, curve_counts, seed, lab_hidden_scenario, judge, progress
+        campaigns, truths, curve_counts, seed, lab_hidden_scenario, judge, progress, source
     )

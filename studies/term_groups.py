@@ -1,5 +1,6 @@
 """The model-term group study: how often a term of the truth's own structure is grouped with
-a catalogue stand-in the data can tell it from, over fast lab campaigns."""
+a catalogue stand-in the data can tell it from, over lab-rig campaigns (by default; fast
+harmonic-balance campaigns as a unit-level check)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from typing import Any, ClassVar, Self
 
 import numpy as np
 
+from identification.criticism.config import SEPARATION
 from identification.criticism.criticism import Criticism, criticize
 from identification.criticism.records import Trial
 from identification.effects import quadratic_stiffness, velocity_squared
@@ -17,8 +19,9 @@ from identification.fitting.data import FitData
 from identification.fitting.fitter import Fitter
 from identification.model import JointModel
 from identification.rig.presets import lab_hidden_scenario
-from studies.driver import Campaign, CampaignRow, is_discovery, run_campaigns
-from studies.rows import Row
+from studies.driver import Campaign, CampaignRow, CampaignSource, is_discovery, run_campaigns
+from studies.outcomes import TermTrialOutcome
+from studies.rows import EndState, Row
 from studies.swaps import SWAP_TRUTHS
 
 __all__ = ["TERM_TRUTHS", "TermGroupRow", "TermTrial", "term_group_study"]
@@ -75,6 +78,18 @@ class TermTrial(Row):
             trial.term, trial.effect, trial.needed, trial.delta_chi2, trial.why, trial.standing
         )
 
+    @property
+    def outcome(self) -> TermTrialOutcome | None:
+        """The trial's category (:class:`~studies.outcomes.TermTrialOutcome`) by its
+        separation at the design; None for a term's removal alone (no stand-in)."""
+        if self.design_lambda is None:
+            return None
+        if self.design_lambda >= SEPARATION:
+            return TermTrialOutcome.FALSE_FLAG if self.standing else TermTrialOutcome.SEPARATED
+        if self.standing:
+            return TermTrialOutcome.RIGHT_GROUP
+        return TermTrialOutcome.NOT_GROUPED_CLOSE
+
 
 @dataclass(frozen=True, kw_only=True)
 class TermGroupRow(CampaignRow):
@@ -92,6 +107,9 @@ class TermGroupRow(CampaignRow):
         Every trial of a stand-in in place of a model term.
     term_groups
         The groups: each the term and its stand-ins.
+    end_state
+        The criticised model (the truth's structure, refitted), its verdict and p-value:
+        the study runs no loop, so round 1 is the end state.
     """
 
     verdict: str
@@ -99,6 +117,7 @@ class TermGroupRow(CampaignRow):
     lambda_truth: float
     trials: tuple[TermTrial, ...]
     term_groups: tuple[tuple[str, ...], ...]
+    end_state: EndState | None = None
 
 
 def term_group_study(
@@ -108,19 +127,23 @@ def term_group_study(
     curve_counts: Sequence[int] = (1, 3, 5, 10),
     seed: int = 0,
     progress: Callable[[TermGroupRow], None] | None = None,
+    source: CampaignSource = CampaignSource.LAB_RIG,
     **options: Any,
 ) -> list[TermGroupRow]:
     """Model-term groups (:attr:`~identification.criticism.criticism.Criticism.term_groups`)
-    over ``campaigns`` fast campaigns (truths and curve counts in turn, lab conditions as
-    :func:`~studies.driver.run_campaigns` draws them), each criticised with its truth's own
-    structure: the lab base model plus one effect ``T`` (the preset ``lab-hidden-<T>``).
+    over ``campaigns`` campaigns (truths and curve counts in turn, drawn by
+    :func:`~studies.driver.run_campaigns` from ``source``: the lab rig by default), each
+    criticised with its truth's own structure: the lab base model plus one effect ``T``
+    (the preset ``lab-hidden-<T>``).
 
     Each trial of a stand-in ``C`` in place of a model term (``T`` or a term of the lab
     base) gets its separation at the design, ``lambda``: the stand-in's structure refitted
     to the noise-free truth — the population model's prediction at the campaign's points,
     driven by the excitation they measured — with the campaign's own covariance, its
     ``χ²`` in the campaign's metric. That is the noncentrality of the trial's ``Δχ²``
-    (the truth's structure fits the noise-free prediction exactly: ``lambda_truth``, ≈ 0):
+    (the truth's structure fits the noise-free prediction exactly: ``lambda_truth``, ≈ 0;
+    the prediction is the criticism's harmonic balance, so on rig data it is the design as
+    the criticism sees it, not the rig's records):
     where it is large the data can tell the term from ``C``, and a group holding ``C``
     is a false flag. Each row also carries the campaign's verdict (a null campaign for the
     truth's structure: groups do not alter it) and its groups.
@@ -137,6 +160,9 @@ def term_group_study(
         Seed of the study.
     progress
         Called with each row as it is done.
+    source
+        Where the campaigns come from (:class:`~studies.driver.CampaignSource`): the lab
+        rig; the harmonic balance only as a fast unit-level check.
     **options
         Passed to :func:`identification.criticism.criticism.criticize`.
 
@@ -163,10 +189,11 @@ def term_group_study(
             lambda_truth=_twin_chi2(crit, twin, crit.base.model),
             trials=tuple(trials),
             term_groups=tuple(tuple(g.effects) for g in crit.term_groups),
+            end_state=EndState.of(crit),
         )
 
     return run_campaigns(
-        campaigns, truths, curve_counts, seed, lab_hidden_scenario, judge, progress
+        campaigns, truths, curve_counts, seed, lab_hidden_scenario, judge, progress, source
     )
 
 
