@@ -3,6 +3,9 @@
 SHELL := /bin/bash
 VENV := .venv
 PY := $(VENV)/bin/python
+# Test processes (pytest-xdist): one per core; a file's tests stay in one process so its
+# fixtures are built once. `make test TEST_WORKERS=0` runs them in this process.
+TEST_WORKERS ?= auto
 # python3.12 may be a pyenv shim that refuses to run; fall back to known install places.
 PYTHON312 := $(shell for c in python3.12 $$HOME/.pyenv/versions/3.12*/bin/python3.12 /usr/local/bin/python3.12 /usr/bin/python3.12; do \
 	$$c -c 'import sys; assert sys.version_info[:2] == (3, 12)' >/dev/null 2>&1 && { echo $$c; break; }; done)
@@ -22,7 +25,7 @@ demo: $(VENV)/.installed
 test: $(VENV)/.installed
 	$(PY) -m ruff check .
 	$(PY) -m ruff format --check .
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 test-all: $(VENV)/.installed
 	$(PY) -m pytest -q -m "slow or not slow"
