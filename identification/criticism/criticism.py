@@ -90,6 +90,7 @@ from identification.criticism.config import (
     CriticismConfig,
 )
 from identification.criticism.decision import Decision
+from identification.criticism.ending import LoopEnd
 from identification.criticism.groups import Groups
 from identification.criticism.moves import Add, Swap, SwapTerm, run_rounds
 from identification.criticism.plots import write_figures
@@ -250,6 +251,7 @@ class Criticism:
         if previous and previous[-1].equation == step.equation:
             previous.pop()  # the same model criticised again: one step
         self.history: list[Step] = [*previous, step]
+        self.loop_end: LoopEnd | None = None  # set on the last criticism run_rounds keeps
 
     # ------------------------------------------------------------------ parts
     @cached_property
