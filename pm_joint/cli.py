@@ -399,7 +399,12 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     p.set_defaults(func=_cmd_train_surrogate)
 
-    p = sub.add_parser("criticize", help="where the model fails and which effect it lacks")
+    p = sub.add_parser(
+        "criticize",
+        help="where the model fails and which effect it lacks",
+        description="Criticise a model against a campaign. The verdicts and what to do next "
+        "after each: docs/criticism.md, section Verdicts.",
+    )
     p.add_argument("dir", help=f"{records}, or a backbones CSV")
     p.add_argument("--model", required=True, help="model JSON file")
     p.add_argument("--out", required=True, help="report folder (criticism.json + figures)")

@@ -13,6 +13,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Self
 
+from identification.criticism.config import Verdict
 from identification.measurements.backbone import BackboneSet
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS
@@ -29,7 +30,7 @@ __all__ = [
 
 #: Verdicts that propose nothing: anything else, on a campaign whose truth has the
 #: criticised structure, is a false discovery.
-QUIET_VERDICTS = ("nothing missing", "drift")
+QUIET_VERDICTS = (Verdict.NOTHING_MISSING, Verdict.DRIFT)
 
 
 def is_discovery(verdict: str) -> bool:

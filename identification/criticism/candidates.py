@@ -23,6 +23,7 @@ from identification.criticism.config import (
     PARTLY,
     SEPARATION,
     CriticismConfig,
+    Verdict,
 )
 from identification.criticism.decision import Decision, separation
 from identification.criticism.directions import mean_prediction
@@ -96,20 +97,20 @@ class Ranking:
         if problems or worse or not significant:
             status = "improves the fit but does not explain it"
         elif captured >= EXPLAINED and not beyond:
-            status = "explained"
+            status = Verdict.EXPLAINED
         elif captured >= PARTLY:
-            status = "partly explained"
+            status = Verdict.PARTLY_EXPLAINED
         else:
-            status = "not explained by the catalogue"
+            status = Verdict.NOT_EXPLAINED
         # Admissible and adequate, yet showing only the onset of what identifies the effect:
         # a nearby mode fits as well, so the catalogue's physics is not a finding.
         onset = (
             onset_only(fit.model, amplitudes_m)
-            if status in ("explained", "partly explained")
+            if status in (Verdict.EXPLAINED, Verdict.PARTLY_EXPLAINED)
             else None
         )
         if onset:
-            status = "partly explained"
+            status = Verdict.PARTLY_EXPLAINED
         # The effect's own contribution (the rest of the refitted model kept) for the words.
         predict = self.refits.fitter.predict
         alone = predict(fit.model.without(effect), amplitudes_m, method=fit.method)
@@ -197,15 +198,17 @@ class Ranking:
         return 0.0 if best is None else best.share
 
     @property
-    def verdict(self) -> str:
-        """One of :data:`~identification.criticism.config.VERDICTS`."""
+    def verdict(self) -> Verdict:
+        """The verdict (:class:`~identification.criticism.config.Verdict`)."""
         if not self.decision.significant:
             drift = any(d.significant for d in self.decision.drift)
-            return "drift" if drift else "nothing missing"
+            return Verdict.DRIFT if drift else Verdict.NOTHING_MISSING
         proposed = self.missing()
         if not proposed:
-            return "not explained by the catalogue"
-        return "explained" if proposed[0].status == "explained" else "partly explained"
+            return Verdict.NOT_EXPLAINED
+        if proposed[0].status == Verdict.EXPLAINED:
+            return Verdict.EXPLAINED
+        return Verdict.PARTLY_EXPLAINED
 
     @property
     def provisional(self) -> Candidate | None:
@@ -216,9 +219,7 @@ class Ranking:
         if self.missing():
             return None
         fitting = [
-            c
-            for c in self.candidates
-            if c.fit is not None and c.status == "not explained by the catalogue"
+            c for c in self.candidates if c.fit is not None and c.status == Verdict.NOT_EXPLAINED
         ]
         return max(fitting, key=lambda c: c.delta_chi2) if fitting else None
 

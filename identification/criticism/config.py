@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from enum import StrEnum
 from typing import Any
 
 from identification.criticism import calibration as cal
@@ -26,6 +27,7 @@ __all__ = [
     "VERDICTS",
     "WORSE",
     "CriticismConfig",
+    "Verdict",
 ]
 
 ALPHA = cal.ALPHA
@@ -58,14 +60,44 @@ MAX_TERM_REFITS = 3
 #: much (squared cosine) with the term's; a rival that shares less cannot stand in for it
 #: within :data:`SEPARATION` unless the term itself is barely needed.
 TERM_OVERLAP = 0.5
-#: Verdicts.
-VERDICTS = (
-    "nothing missing",
-    "drift",
-    "explained",
-    "partly explained",
-    "not explained by the catalogue",
-)
+
+
+class Verdict(StrEnum):
+    """The verdicts of a criticism: one list, shared by the words, ``criticism.json`` (which
+    writes the plain strings), the report and the studies (``docs/criticism.md``, "Verdicts").
+
+    Attributes
+    ----------
+    NOTHING_MISSING
+        The calibrated decision does not fire: nothing is missing beyond the scatter.
+    DRIFT
+        The decision does not fire, and the up- and down-stepped branches differ by time,
+        not amplitude: drift, not missing physics.
+    EXPLAINED
+        The decision fires and an admissible, adequate catalogue effect captures at least
+        :data:`EXPLAINED` of the free-form reference's gain.
+    PARTLY_EXPLAINED
+        The decision fires and the best proposed effect captures at least :data:`PARTLY` of
+        it but is not explained: it captures less than :data:`EXPLAINED`, leaves the residual
+        beyond the scatter in a channel group, or shows only a slip onset that a nearby mode
+        fits as well (:func:`~identification.criticism.adequacy.onset_only`).
+    NOT_EXPLAINED
+        The decision fires and no catalogue effect is proposed: the free-form describing
+        functions show the shape of what is missing.
+
+    The several-modes work adds "a second mode" to this list.
+    """
+
+    NOTHING_MISSING = "nothing missing"
+    DRIFT = "drift"
+    EXPLAINED = "explained"
+    PARTLY_EXPLAINED = "partly explained"
+    NOT_EXPLAINED = "not explained by the catalogue"
+
+
+#: The verdicts, in :class:`Verdict`'s order.
+VERDICTS = tuple(Verdict)
+#: Information criteria a candidate is reported by.
 CRITERIA = ("aic", "bic")
 POSTERIOR_KINDS = ("population", "mean")
 

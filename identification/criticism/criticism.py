@@ -88,6 +88,7 @@ from identification.criticism.config import (
     VERDICTS,
     WORSE,
     CriticismConfig,
+    Verdict,
 )
 from identification.criticism.decision import Decision
 from identification.criticism.ending import LoopEnd
@@ -134,6 +135,7 @@ __all__ = [
     "SwapTrial",
     "TermGroup",
     "Trial",
+    "Verdict",
     "criticize",
     "run_rounds",
 ]
@@ -319,7 +321,7 @@ class Criticism:
     @property
     def unexplained(self) -> bool:
         """Whether something is missing that the catalogue does not (fully) explain."""
-        return self.verdict in ("partly explained", "not explained by the catalogue")
+        return self.verdict in (Verdict.PARTLY_EXPLAINED, Verdict.NOT_EXPLAINED)
 
     @property
     def adequate(self) -> bool:

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from identification.criticism.config import SEPARATION
+from identification.criticism.config import SEPARATION, Verdict
 from identification.criticism.readings import CHANNEL_LABELS
 from identification.effects import get_effect
 from identification.fitting.least_squares import FitResult
@@ -147,7 +147,7 @@ class Candidate:
 
     @property
     def proposed(self) -> bool:
-        return self.status in ("explained", "partly explained")
+        return self.status in (Verdict.EXPLAINED, Verdict.PARTLY_EXPLAINED)
 
     def __repr__(self) -> str:
         """One line of numbers, then the reading: ``<Candidate microslip: explained,
@@ -188,7 +188,7 @@ class Candidate:
     def to_dict(self) -> dict[str, Any]:
         out = {
             "effect": self.effect,
-            "status": self.status,
+            "status": str(self.status),
             "gain": self.gain,
             "shape": self.shape,
             "significant": self.significant,
@@ -470,7 +470,7 @@ def ranking_entry(c: Candidate) -> dict[str, Any]:
     """A proposed candidate as the report's ranking lists it."""
     return {
         "effect": c.effect,
-        "status": c.status,
+        "status": str(c.status),
         "alternative": c.alternative,
         "explained_share": c.share,
         "delta_chi2": c.delta_chi2,

@@ -22,7 +22,7 @@ def round_report(crit: Criticism) -> dict[str, Any]:
     return {
         "action": crit.history[-1].action,
         "equation": crit.base.model.equation(),
-        "verdict": crit.verdict,
+        "verdict": str(crit.verdict),
         "verdict_text": crit.verdict_text,
         "significant": crit.significant,
         "threshold": crit.threshold,
@@ -51,7 +51,7 @@ def to_dict(crit: Criticism) -> dict[str, Any]:
         "equation": crit.base.model.equation(),
         "method": crit.base.method,
         "criterion": crit.criterion,
-        "verdict": crit.verdict,
+        "verdict": str(crit.verdict),
         "verdict_text": crit.verdict_text,
         "significant": crit.significant,
         "unexplained": crit.unexplained,

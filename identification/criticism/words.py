@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from identification.criticism.adequacy import no_solution
+from identification.criticism.config import Verdict
 from identification.criticism.directions import mean_prediction
 from identification.criticism.readings import CHANNEL_LABELS
 from identification.criticism.records import Candidate, rmse_pairs
@@ -33,20 +34,20 @@ __all__ = [
 def verdict_text(crit: Criticism) -> str:
     """The verdict in one sentence."""
     verdict, share = crit.verdict, crit.explained_share
-    if verdict == "nothing missing":
+    if verdict == Verdict.NOTHING_MISSING:
         return "nothing missing beyond the scatter"
-    if verdict == "drift":
+    if verdict == Verdict.DRIFT:
         return "nothing missing as physics; the branches show drift (see below)"
     best = crit.best
-    if verdict == "explained":
+    if verdict == Verdict.EXPLAINED:
         return f"explained by {best.effect} ({100 * (share or 1):.0f} % of the free-form gain)"
-    if verdict == "partly explained" and best.alternative:
+    if verdict == Verdict.PARTLY_EXPLAINED and best.alternative:
         captured = f"{100 * share:.0f} %" if share is not None else "all"
         return (
             f"partly explained: {best.effect} fits ({captured} of the free-form gain) but is "
             f"not identified; consistent with {best.effect} OR with {best.alternative}"
         )
-    if verdict == "partly explained":
+    if verdict == Verdict.PARTLY_EXPLAINED:
         captured = f"{100 * share:.0f} %" if share is not None else "all"
         text = (
             f"partly explained: {best.effect} captures {captured} of what a free-form "
