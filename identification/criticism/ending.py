@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from identification.criticism.adequacy import fitted_problems
-from identification.criticism.config import STOP_SHARE
+from identification.criticism.config import STOP_SHARE, Verdict
 
 if TYPE_CHECKING:
     from identification.criticism.criticism import Criticism
@@ -174,7 +174,7 @@ class LoopEnd:
     added: tuple[Added, ...]
     stop: Stop
     why: str
-    verdict: str
+    verdict: Verdict
     verdict_text: str
     p_value: float
     problems: tuple[str, ...]
@@ -238,6 +238,6 @@ def loop_end(
     last_in = {a.effect: a for a in added if a.effect in model and a.effect not in start}
     held = [a for a in added if last_in.get(a.effect) is a]
     return LoopEnd(
-        model.equation(), tuple(held), stop, why, last.verdict, last.verdict_text,
+        model.equation(), tuple(held), stop, why, Verdict(last.verdict), last.verdict_text,
         float(last.p_value), problems_of(last), Rest.of(last), min_share,
     )  # fmt: skip
