@@ -209,48 +209,41 @@ def run_rounds(crit: Criticism, rounds: int, min_share: float = STOP_SHARE) -> l
     n_added = term_swaps = 0
     while True:
         crit = chain[-1]
-        if not crit.significant:
-            stop, why = Stop.NOTHING_MISSING, "the calibrated test does not fire"
-            break
         proposed = crit.missing()
         if not proposed:
             swapped = SwapTerm().apply(crit) if term_swaps < rounds else None
             refused = problems_of(swapped) if swapped is not None else ()
             if swapped is not None and not refused:
                 step = swapped.history[-1]
-                added += [Added(e, None, None, f"in place of the model's {', '.join(step.removed)}")
-                          for e in step.added]  # fmt: skip
+                how = f"in place of the model's {', '.join(step.removed)}"
+                added += [Added(e, None, None, how) for e in step.added]
                 chain.append(swapped)
                 term_swaps += 1
                 continue
-            share = crit.explained_share
-            stop, why = (
-                Stop.NOT_SHAPED,
-                (
-                    "no admissible catalogue candidate captures enough of the free-form gain to be "
-                    f"proposed (the best: {_percent(share)})"
-                ),
-            )
+            if not crit.significant:
+                stop, why = Stop.NOTHING_MISSING, "the calibrated test does not fire"
+            else:
+                stop = Stop.NOT_SHAPED
+                why = (
+                    "no admissible catalogue candidate captures enough of the free-form gain "
+                    f"to be proposed (the best: {_percent(crit.explained_share)})"
+                )
             if refused:
                 why += f"; the model-term swap was refused: {'; '.join(refused)}"
             break
         best = proposed[0]
         if best.share is not None and best.share < min_share:
-            stop, why = (
-                Stop.BELOW_SHARE,
-                (
-                    f"the next candidate, {best.effect}, captures {_percent(best.share)} of the "
-                    f"gain left, below {_percent(min_share)}"
-                ),
+            stop = Stop.BELOW_SHARE
+            why = (
+                f"the next candidate, {best.effect}, captures {_percent(best.share)} of the "
+                f"gain left, below {_percent(min_share)}"
             )
             break
         if n_added >= rounds:
-            stop, why = (
-                Stop.ROUNDS,
-                (
-                    f"{rounds} effect{'s' if rounds != 1 else ''} added; next proposed: "
-                    f"{best.effect} ({_percent(best.share)} of the gain left)"
-                ),
+            stop = Stop.ROUNDS
+            why = (
+                f"{rounds} effect{'s' if rounds != 1 else ''} added; next proposed: "
+                f"{best.effect} ({_percent(best.share)} of the gain left)"
             )
             break
         effect = best.effect
@@ -258,10 +251,8 @@ def run_rounds(crit: Criticism, rounds: int, min_share: float = STOP_SHARE) -> l
         following = Swap(alternatives, effect).apply(Add(effect).apply(crit))
         refused = problems_of(following)
         if refused:
-            stop, why = (
-                Stop.INADMISSIBLE,
-                (f"adding {effect} ends on an inadmissible model: {'; '.join(refused)}"),
-            )
+            stop = Stop.INADMISSIBLE
+            why = f"adding {effect} ends on an inadmissible model: {'; '.join(refused)}"
             break
         added.append(Added(effect, best.share, best.delta_chi2, "added"))
         step = following.history[-1]
