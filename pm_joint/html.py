@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from identification.artifacts import atomic_write_text
+from identification.criticism.words import SMALL
 
 __all__ = [
     "Section",
@@ -236,6 +237,8 @@ def criticism_section(
         "Something significant is missing." if content["significant"]
         else "Nothing significant missing."
     )  # fmt: skip
+    if content.get("small"):  # a record written before the qualifier has none
+        verdict += f" It is {SMALL.removeprefix('missing, ')}."
     fails = "; ".join(r.get("text", str(r)) for r in content.get("fails_at", [])) or "nowhere"
     findings = [_round_finding(k, len(rounds), r) for k, r in enumerate(rounds, start=1)]
     final = f"The final model, {content['equation']}: {verdict} Where it fails: {fails}."

@@ -33,18 +33,22 @@ catalogue column (every effect over its shape grid, linearised) and of a free-fo
 reference (smooth equivalent stiffness, damping and harmonics against amplitude)
 are compared with their distribution under the refitted model itself: a parametric
 bootstrap of whole campaigns, the covariance re-estimated on each. Something is
-missing when either gain exceeds its threshold (set so that a null campaign fires
-with probability ``alpha``) *and* ``where()`` finds a level beyond its own
-calibrated bound. Threshold, ``alpha`` and the bootstrap size come with the verdict.
+missing when either gain exceeds its threshold (the two calibrated jointly, so that a
+null campaign fires either with probability ``alpha``): that alone decides
+(:attr:`Criticism.significant`). ``where()`` describes where, against its own calibrated
+bound; a finding no single level shows is **small** (:attr:`Criticism.small`: seen in
+the trend over the levels, within the scatter at each). Threshold, ``alpha`` and the
+bootstrap size come with the verdict.
 
 **Explained, or not.** Significant candidates are refitted (nonlinear) and judged:
 admissible as physics (non-negative damping over the tested range, friction
 opposing motion, no cancelling terms: :mod:`identification.criticism.adequacy`),
 no channel worse beyond its noise, residual within the calibrated scatter in every
 channel, and the share of the reference's gain they capture
-(:func:`identification.criticism.reference.explained_share`). The verdict is
-"explained" (adequate, share ≥ :data:`EXPLAINED`), "partly explained" (share ≥
-:data:`PARTLY`), "not explained by the catalogue", or "nothing missing"; a candidate
+(:func:`identification.criticism.reference.explained_share`). The verdict
+(:class:`~identification.criticism.config.Verdict`) is "explained" (adequate, share ≥
+:data:`EXPLAINED`), "partly explained" (share ≥ :data:`PARTLY`), "not explained by the
+catalogue", or, where the decision does not fire, "nothing missing" or "drift"; a candidate
 that improves the fit without being admissible or adequate is listed as "improves
 the fit but does not explain it" and never proposed. A slip element of which the test
 holds only the onset (its damping peak, at twice the slip amplitude, above the top level)
@@ -306,6 +310,7 @@ class Criticism:
     where = _Part("decision")
     fires = _Part("decision")
     significant = _Part("decision")
+    small = _Part("decision")
     beyond_scatter = _Part("decision")
     reference = _Part("decision")
     drift = _Part("decision")

@@ -5,7 +5,8 @@ linearised problem at the refitted base model, the observed gains of the catalog
 best column and of the free-form reference, their bootstrap calibration (thresholds,
 p-value), the per-channel ``χ²`` a candidate is judged by, the comparison of mean
 curve and prediction, and :meth:`Decision.where` (amplitude ranges beyond the
-calibrated bound). The verdict rule is :attr:`Decision.significant`.
+calibrated bound: it describes, it does not decide). The rule that something is missing
+is :attr:`Decision.significant`, the calibrated decision alone.
 """
 
 from __future__ import annotations
@@ -269,7 +270,8 @@ class Decision:
     # ---------------------------------------------------------------- decide
     @cached_property
     def fires(self) -> dict[str, bool]:
-        """Which calibrated tests fire: the catalogue's, the reference's, ``where()``'s."""
+        """Which calibrated tests fire: the catalogue's, the reference's, ``where()``'s (the
+        last describes; it does not decide, see :attr:`significant`)."""
         return {
             "catalogue": bool(self.observed.catalogue[0] > self.calibration.catalogue_threshold),
             "reference": bool(self.observed.reference[0] > self.calibration.reference_threshold),
@@ -278,9 +280,25 @@ class Decision:
 
     @property
     def significant(self) -> bool:
-        """Whether something is missing: a calibrated test fires and ``where()`` locates it."""
+        """Whether something is missing: the calibrated decision alone.
+
+        The catalogue test or the free-form reference test fires; the two are combined by
+        the smaller of their bootstrap p-values and calibrated jointly
+        (:func:`~identification.criticism.calibration.calibrate`), so that either fires on
+        a campaign the refitted model explains with probability ``alpha``. ``where()`` only
+        says where: a finding no single level shows is :attr:`small`, not absent (a gate on
+        it is outside the calibration and costs power where an effect is a small trend over
+        many levels).
+        """
         fires = self.fires
-        return (fires["catalogue"] or fires["reference"]) and fires["where"]
+        return fires["catalogue"] or fires["reference"]
+
+    @property
+    def small(self) -> bool:
+        """Something is missing that no single level shows: the decision fires, and
+        ``where()`` finds no level beyond its bound — seen in the trend over the levels,
+        within the scatter at each."""
+        return self.significant and not self.fires["where"]
 
     @cached_property
     def beyond_scatter(self) -> tuple[str, ...]:

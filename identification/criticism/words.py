@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from identification.criticism.criticism import Criticism
 
 __all__ = [
+    "SMALL",
     "caveats",
     "nearby_mode_words",
     "no_solution_texts",
@@ -30,9 +31,18 @@ __all__ = [
     "verdict_text",
 ]
 
+#: What a finding no single level shows is (:attr:`Decision.small
+#: <identification.criticism.decision.Decision.small>`), in words.
+SMALL = "missing, small: seen in the trend over the levels, within the scatter at each"
+
 
 def verdict_text(crit: Criticism) -> str:
-    """The verdict in one sentence."""
+    """The verdict in one sentence (with :data:`SMALL` where no single level shows it)."""
+    text = _verdict_words(crit)
+    return f"{text}; {SMALL}" if crit.small else text
+
+
+def _verdict_words(crit: Criticism) -> str:
     verdict, share = crit.verdict, crit.explained_share
     if verdict == Verdict.NOTHING_MISSING:
         return "nothing missing beyond the scatter"
@@ -116,7 +126,9 @@ def summary(crit: Criticism) -> str:
     )
     lines += [f"caveat: {c}" for c in crit.caveats]
     failures = crit.where()
-    lines += [f"fails: {f.text}" for f in failures] or ["fails: nowhere beyond the scatter"]
+    nowhere = "at no single level" if crit.small else "nowhere"
+    nowhere += " beyond the scatter"
+    lines += [f"fails: {f.text}" for f in failures] or [f"fails: {nowhere}"]
     for text in no_solution_texts(crit):
         lines.append(f"fails: {text}")
     lines.append(f"verdict: {crit.verdict_text}")
