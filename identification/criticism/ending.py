@@ -122,6 +122,8 @@ class Rest:
 
     @property
     def text(self) -> str:
+        if not (np.isfinite(self.stiffness_share).any() and np.isfinite(self.damping_share).any()):
+            return "no describing functions (the final model has no solution at the levels)"
         i = int(np.nanargmax(np.abs(self.stiffness_share)))
         j = int(np.nanargmax(np.abs(self.damping_share)))
         mm = self.amplitude_mm
