@@ -1,18 +1,19 @@
 """The loop's end on lab-rig campaigns: where the stepwise loop stops, on what, and why.
 
-``--tune`` (tuning seeds, ``0 … 999_999``) runs the loop with no share threshold and records
-every step (the share of the gain left each addition captured, the verdict, p-value and
-admissibility of each model kept), then replays the loop at each threshold of a grid: a loop
-with threshold T is the same loop cut at its first addition below T. The threshold is chosen
-by the rule written in docs/criticism.md ("The loop's end") before this ran.
+``--tune`` runs the loop with no share threshold and records every step (the share of the
+gain left each addition captured, the verdict, p-value and admissibility of each model
+kept), then replays the loop at each threshold of a grid: a loop with threshold T is the
+same loop cut at its first addition below T. On tuning seeds (``0 … 999_999``) the threshold
+is chosen by the rule written in docs/criticism.md ("The loop's end") before the run; on
+held-out seeds the rows are read at the chosen threshold only after it was fixed.
 
-Without ``--tune`` (held-out seeds from ``HELD_OUT_SEED``), it runs the loop as the library
-does (:data:`~identification.criticism.config.STOP_SHARE`) and reports per row the final
-model, the final verdict and p-value, whether the final model is admissible, the smallest
-share a final term explained when it was added, and the stop.
+Without ``--tune`` (held-out seeds only) it runs the loop as the library does
+(:data:`~identification.criticism.config.STOP_SHARE`) and reports per row the final model,
+the final verdict and p-value, whether the final model is admissible, the smallest share a
+final term explained when it was added, and the stop.
 
-    nice -n 10 python bench/criticism_loop.py --tune --seeds 1
-    nice -n 10 python bench/criticism_loop.py --first-seed 1000000 --seeds 1
+    nice -n 10 python bench/criticism_loop.py --tune --seeds 1 --scenarios lab-iwan,...
+    nice -n 10 python bench/criticism_loop.py --tune --first-seed 2000000 --seeds 1 ...
 
 Ends with one JSON line; writes ``bench/results/criticism_loop[_tune].json``.
 """
