@@ -139,12 +139,10 @@ def test_a_lab_rig_campaign_with_one_hidden_effect_gets_it_and_no_second_term():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("scenario", ["lab-iwan", "lab-power-law-damping"])
+@pytest.mark.parametrize("scenario", ["lab-iwan", "lab-clearance"])
 def test_an_out_of_catalogue_joint_ends_admissible_and_consistent(scenario):
     """Lab rig, physics no catalogue term is: run to its end, the loop's final model is
     admissible, every effect it holds beyond the start explained at least the stated share
     of the gain left when it came in, and where the final calibrated test fires the
     verdict says something is missing."""
-    result = criticism_study(scenario, 0, start="linear", rounds=3)
-    end = _checked_end(result)
-    assert len(end.added) <= 2, end.lines()
+    _checked_end(criticism_study(scenario, 0, start="linear", rounds=3))
