@@ -6,15 +6,20 @@ coefficients must describe a joint a resonance test could have measured
 
 * **non-negative dissipation** over the tested range: the total equivalent damping
   (the predicted damping ratio) ≥ 0 at every level — a phase-locked test feeds
-  power in at every level;
+  power in at every level — and the terms' summed equivalent damping
+  ``Σ c_i c_eq,i(a, ω(a))`` ≥ 0 at every amplitude between the lowest and the top level
+  (:data:`RANGE_POINTS` log-spaced amplitudes besides the levels; ``ω(a)`` interpolated
+  from the predicted frequencies), so no dip below zero hides between two levels;
+* **a positive linear stiffness**: the structure's own spring restores at rest (a
+  negative one made up for by a nonlinear term is a fit trading terms, not a joint);
 * **friction and slip forces oppose the motion**: effects whose physics has a sign
   (:attr:`identification.effects.Effect.coefficient_sign`) have it;
 * **no joint term pushes away from equilibrium at rest**: a nonlinear term whose
   stiffness at rest (its equivalent stiffness as the amplitude goes to zero) is
   negative, which a larger linear stiffness then makes up for (a hardening described
   as a stiffer structure minus a saturating spring), is a negative spring, not a joint;
-* **no large cancelling terms**: where the terms' equivalent stiffnesses (or
-  dampings) ``c_i k_eq,i(a)`` add up in absolute value to much more than their net
+* **no large cancelling terms** (over the same amplitudes): where the terms' equivalent
+  stiffnesses (or dampings) ``c_i k_eq,i(a)`` add up in absolute value to much more than their net
   sum (``Σ|c_i k_eq,i| > CANCELLATION · |Σ c_i k_eq,i|``), the fit trades terms
   against each other (a 4× linear stiffness cancelled by a large tanh) and none of
   them reads as physics;
@@ -30,14 +35,29 @@ from __future__ import annotations
 
 import numpy as np
 
+from identification.criticism.directions import mean_prediction
 from identification.effects import CATALOGUE, LINEAR_STIFFNESS
+from identification.fitting.data import FitData
+from identification.fitting.least_squares import FitResult
 from identification.model import JointModel
 
-__all__ = ["CANCELLATION", "NEARBY_MODE", "admissibility", "no_solution", "onset_only"]
+__all__ = [
+    "CANCELLATION",
+    "NEARBY_MODE",
+    "RANGE_POINTS",
+    "admissibility",
+    "fitted_problems",
+    "no_solution",
+    "onset_only",
+]
 
 #: Ratio of the sum of absolute term contributions to their net sum beyond which the
 #: terms are said to cancel (a physical softening-then-hardening joint stays near 1).
 CANCELLATION = 2.0
+#: Amplitudes (log-spaced over the tested range, besides the levels) at which the summed
+#: equivalent damping and the cancellation are checked: a term whose damping turns negative
+#: between two levels (a negative ẋ³ beside a Coulomb term) is caught there.
+RANGE_POINTS = 64
 
 
 def no_solution(levels_m: np.ndarray, predicted: np.ndarray) -> str | None:
@@ -86,13 +106,25 @@ def admissibility(
                 f"{term.effect} has a negative coefficient ({term.coefficient:.3g}): a friction "
                 "or slip force that pushes the motion instead of opposing it"
             )
+    if LINEAR_STIFFNESS in model and model.coefficient(LINEAR_STIFFNESS) <= 0:
+        problems.append(
+            f"a non-positive linear stiffness ({model.coefficient(LINEAR_STIFFNESS):.3g}): the "
+            "structure has no restoring spring at rest"
+        )
     if ok.any():
-        omega = 2 * np.pi * frequency_hz[ok]
-        a = levels_m[ok]
+        a, omega = _measured_range(levels_m[ok], 2 * np.pi * frequency_hz[ok])
         parts = []
         for term in model.terms:
             k_eq, c_eq = CATALOGUE[term.effect].describing(a, omega, **term.shape)
             parts.append((term.effect, term.coefficient * k_eq, term.coefficient * c_eq))
+        damping = np.sum([p[2] for p in parts], axis=0)
+        below = damping < 0
+        if below.any() and not negative.any():  # the levels' own words said it already
+            problems.append(
+                "negative summed equivalent damping between the levels, at "
+                f"{1e3 * a[below].min():.2g}–{1e3 * a[below].max():.2g} mm (energy fed in by "
+                "the joint)"
+            )
         for index, kind in ((1, "stiffness"), (2, "damping")):
             values = np.array([p[index] for p in parts])
             net = np.abs(values.sum(axis=0))
@@ -108,6 +140,24 @@ def admissibility(
                     f"{ratio[worst]:.1f}× the net at {1e3 * a[worst]:.2g} mm ({words})"
                 )
     return problems
+
+
+def _measured_range(levels_m: np.ndarray, omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The levels and :data:`RANGE_POINTS` log-spaced amplitudes between the lowest and the
+    top one (m), with the frequency (rad/s) interpolated in log-amplitude between the
+    levels' predictions."""
+    between = np.geomspace(levels_m[0], levels_m[-1], RANGE_POINTS)
+    a = np.unique(np.concatenate([levels_m, between]))
+    return a, np.interp(np.log(a), np.log(levels_m), omega)
+
+
+def fitted_problems(data: FitData, fit: FitResult) -> list[str]:
+    """What makes a refitted model inadmissible as physics (:func:`admissibility` on its
+    mean prediction at the levels), a failed solve first; empty: admissible."""
+    table = mean_prediction(data, fit.predicted)
+    f, z = data.column("frequency_hz"), data.column("damping_ratio")
+    problems = admissibility(fit.model, data.levels_m, table[:, f], table[:, z])
+    return problems if fit.solved else [fit.outcome_text, *problems]
 
 
 #: Where "at rest" is evaluated, as a share of the smallest tested amplitude; a stiffness at

@@ -46,6 +46,7 @@ SEPARATION = 6.63
 #: rises by more than this (χ²₁, 1 %) and by more than its value before (it doubles).
 #: Its false vetoes are counted by the same study.
 WORSE = 6.63
+STOP_SHARE = 0.7  # the loop's parsimony rule (criticism/ending.py; docs/criticism.md)
 #: Candidates refitted (nonlinear) at most, best linearised gains first.
 MAX_REFITS = 8
 #: The model's own terms that are never put in a model-term group: the linear pair every

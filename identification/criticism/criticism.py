@@ -15,9 +15,10 @@ The loop a user runs::
 it by one of that round's significant runners-up, and keeps a change the same ``χ²``
 supports: a removal that costs less than the calibrated threshold, a replacement that
 gains more than :data:`SEPARATION`. With two effects missing, a stand-in that mimics
-both alone gives way to the true effect once the other is in; and when neither alone
-captures enough of the free-form gain to be proposed, the best admissible one is added
-on trial and kept only if the next round explains the data.
+both alone gives way to the true effect once the other is in. The loop stops when the
+next candidate captures less than :data:`~.config.STOP_SHARE` of the free-form gain left, when
+nothing is proposed, or when the next model would be inadmissible; its answer is the last
+criticism's ``loop_end`` (:class:`~identification.criticism.ending.LoopEnd`).
 
 **One statistic.** Everything is judged by one likelihood
 (:mod:`identification.fitting.data`): the residual of the *mean* curve at common
@@ -95,6 +96,7 @@ from identification.criticism.config import (
     Verdict,
 )
 from identification.criticism.decision import Decision
+from identification.criticism.ending import LoopEnd
 from identification.criticism.groups import Groups
 from identification.criticism.moves import Add, Swap, SwapTerm, run_rounds
 from identification.criticism.plots import write_figures
@@ -189,6 +191,9 @@ class Criticism:
         The earlier rounds' reports (:meth:`round_report`), first first.
     executor
         Where the candidates' refits run (see :func:`criticize`); None: here.
+    loop_end
+        The loop's final answer (:class:`~identification.criticism.ending.LoopEnd`) on
+        the last criticism :func:`run_rounds` keeps; None elsewhere.
     swaps
         The changes the swap step tried after this round's addition
         (:class:`~identification.criticism.records.SwapTrial`), each with whether it was
@@ -256,6 +261,7 @@ class Criticism:
         if previous and previous[-1].equation == step.equation:
             previous.pop()  # the same model criticised again: one step
         self.history: list[Step] = [*previous, step]
+        self.loop_end: LoopEnd | None = None  # set on the last criticism run_rounds keeps
 
     # ------------------------------------------------------------------ parts
     @cached_property

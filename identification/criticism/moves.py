@@ -17,7 +17,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
-from identification.criticism.config import SEPARATION
+from identification.criticism.adequacy import fitted_problems
+from identification.criticism.config import SEPARATION, STOP_SHARE
+from identification.criticism.ending import Added, Stop, loop_end, problems_of
 from identification.criticism.records import SwapTrial
 from identification.effects import get_effect
 from identification.fitting.least_squares import FitResult
@@ -29,6 +31,8 @@ __all__ = ["Add", "Swap", "SwapTerm", "run_rounds"]
 
 #: The rule a replacement is kept by (the swap step's and the model-term swap's).
 REPLACE_IF = f"gain > {SEPARATION:.4g}, admissible, no channel worse"
+#: The rule a removal is kept by (the calibrated threshold filled in).
+REMOVE_IF = "cost < {threshold:.4g}, admissible"
 
 
 @dataclass(frozen=True)
@@ -89,9 +93,9 @@ class Swap:
         for earlier in [e for e in self.alternatives if e in model and e != self.last]:
             without = crit.refits.structure(model.without(earlier))
             cost = decision.chi2(without) - chi2
-            trials.append(
-                SwapTrial(earlier, None, -cost, keep_if=f"cost < {decision.threshold:.4g}")
-            )
+            why = "; ".join(fitted_problems(crit.data, without))
+            trials.append(SwapTrial(earlier, None, -cost, False, why, REMOVE_IF.format(
+                threshold=decision.threshold)))  # fmt: skip
             fits.append(without)
             for other in self.alternatives[earlier]:
                 if other in model:
@@ -106,8 +110,9 @@ class Swap:
             if t.add is not None and not t.why and t.delta_chi2 > SEPARATION
         ]  # fmt: skip
         removals = [
-            i for i, t in enumerate(trials) if t.add is None and -t.delta_chi2 < decision.threshold
-        ]
+            i for i, t in enumerate(trials)
+            if t.add is None and not t.why and -t.delta_chi2 < decision.threshold
+        ]  # fmt: skip
         if replacements:
             chosen = max(replacements, key=lambda i: trials[i].delta_chi2)
         elif removals:
@@ -171,51 +176,96 @@ class SwapTerm:
         )
 
 
-def run_rounds(crit: Criticism, rounds: int) -> list[Criticism]:
-    """Forward-backward stepwise selection from ``crit``: up to ``rounds`` effects added.
+def run_rounds(crit: Criticism, rounds: int, min_share: float = STOP_SHARE) -> list[Criticism]:
+    """Forward-backward stepwise selection from ``crit``: up to ``rounds`` effects added,
+    and a loop that stops.
 
     Each round adds the effect proposed first (:meth:`Criticism.missing`, :class:`Add`),
     then runs the swap step (:class:`Swap`) over the effects added in earlier rounds.
     When nothing is proposed, a term of the model that the data prefer a catalogue effect
     in place of (:class:`SwapTerm`, e.g. a SINDy start's ẋ² for x²) is replaced first, as
-    a round of its own that adds no effect (at most ``rounds`` such swaps). When nothing
-    is proposed but a provisional candidate exists (two effects missing: neither explains
-    enough alone), it is added on trial and kept only when the next round's verdict is
-    "explained" (an effect that, beside it, explains the data: two additions); otherwise
-    the loop stops.
+    a round of its own that adds no effect (at most ``rounds`` such swaps). The loop stops
+    (:class:`~identification.criticism.ending.Stop`) when the calibrated test does not
+    fire; when it fires and nothing is proposed (no admissible candidate captures enough of
+    the free-form reference's gain: the rest is not shaped like any candidate); when the
+    first proposed candidate captures less than ``min_share`` of the reference's gain on
+    the current model (the gain left); when the next model (the addition with its swap,
+    or a model-term swap) is inadmissible, keeping the last admissible one; or after
+    ``rounds`` additions. Nothing is ever added on trial: each effect the final model
+    holds explained at least ``min_share`` of what was left when it came in.
 
     Returns
     -------
     list of Criticism
         The criticism of each model the loop kept, ``crit`` first; the last one's
-        ``rounds`` hold every round's report, with its swaps.
+        ``rounds`` hold every round's report, with its swaps, and its ``loop_end`` the
+        final answer (:class:`~identification.criticism.ending.LoopEnd`; the last one is
+        a shallow copy of the criticism it ends on, so a criticism handed in is left as
+        it was).
     """
     chain = [crit]
     alternatives: dict[str, list[str]] = {}
-    added = term_swaps = 0
-    while added < rounds:
+    added: list[Added] = []
+    n_added = term_swaps = 0
+    while True:
         crit = chain[-1]
         proposed = crit.missing()
         if not proposed:
             swapped = SwapTerm().apply(crit) if term_swaps < rounds else None
-            if swapped is not None:
+            refused = problems_of(swapped) if swapped is not None else ()
+            if swapped is not None and not refused:
+                step = swapped.history[-1]
+                how = f"in place of the model's {', '.join(step.removed)}"
+                added += [Added(e, None, None, how) for e in step.added]
                 chain.append(swapped)
                 term_swaps += 1
                 continue
-            trial = crit.provisional
-            if trial is None or added + 2 > rounds:
-                break
-            tried = Add(trial.effect).apply(crit)
-            # kept only when the pair explains the data: out-of-catalogue physics, which
-            # catalogue terms partly mimic one after another, is not fitted term by term
-            if tried.verdict != "explained":
-                break
-            alternatives[trial.effect] = crit.alternatives(trial.effect)
-            chain.append(tried)
-            added += 1
-            continue
-        effect = proposed[0].effect
+            if not crit.significant:
+                stop, why = Stop.NOTHING_MISSING, "the calibrated test does not fire"
+            else:
+                stop = Stop.NOT_SHAPED
+                why = (
+                    "no admissible catalogue candidate captures enough of the free-form gain "
+                    f"to be proposed (the best: {_percent(crit.explained_share)})"
+                )
+            if refused:
+                why += f"; the model-term swap was refused: {'; '.join(refused)}"
+            break
+        best = proposed[0]
+        if best.share is not None and best.share < min_share:
+            stop = Stop.BELOW_SHARE
+            why = (
+                f"the next candidate, {best.effect}, captures {_percent(best.share)} of the "
+                f"gain left, below {_percent(min_share)}"
+            )
+            break
+        if n_added >= rounds:
+            stop = Stop.ROUNDS
+            why = (
+                f"{rounds} effect{'s' if rounds != 1 else ''} added; next proposed: "
+                f"{best.effect} ({_percent(best.share)} of the gain left)"
+            )
+            break
+        effect = best.effect
         alternatives[effect] = crit.alternatives(effect)
-        chain.append(Swap(alternatives, effect).apply(Add(effect).apply(crit)))
-        added += 1
+        following = Swap(alternatives, effect).apply(Add(effect).apply(crit))
+        refused = problems_of(following)
+        if refused:
+            stop = Stop.INADMISSIBLE
+            why = f"adding {effect} ends on an inadmissible model: {'; '.join(refused)}"
+            break
+        added.append(Added(effect, best.share, best.delta_chi2, "added"))
+        step = following.history[-1]
+        for effect_in, effect_out in zip(step.added[1:], step.removed, strict=False):
+            share = next((a.share for a in reversed(added) if a.effect == effect_out), None)
+            added.append(Added(effect_in, share, None, f"in place of {effect_out}"))
+        chain.append(following)
+        n_added += 1
+    last = copy.copy(chain[-1])
+    last.loop_end = loop_end(chain, added, stop, why, min_share)
+    chain[-1] = last
     return chain
+
+
+def _percent(share: float | None) -> str:
+    return "all" if share is None else f"{100 * share:.0f} %"

@@ -94,6 +94,7 @@ def to_dict(crit: Criticism) -> dict[str, Any]:
         "drift": [d.to_dict() for d in crit.drift],
         "reference": crit.reference.to_dict(),
         "rounds": crit.rounds,
+        "loop_end": crit.loop_end.to_dict() if crit.loop_end else None,
         "history": [s.to_dict() for s in crit.history],
         "summary": crit.summary(),
         "n_curves": len(crit.data.labels),

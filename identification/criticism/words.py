@@ -161,6 +161,7 @@ def summary(crit: Criticism) -> str:
     lines += [f"drift: {d.text}" for d in crit.drift if d.significant]
     if crit.significant:
         lines.append(f"free-form reference: {_shape_words(crit)}")
+    lines += crit.loop_end.lines() if crit.loop_end else []
     return "\n".join(lines)
 
 
