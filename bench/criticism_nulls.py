@@ -48,6 +48,11 @@ LEVELS = (0.01, 0.05, 0.1)
 KS_LEVEL = 0.01
 RESULTS = Path(__file__).parent / "results"
 FLOORS = {"floors": None, "no_floors": NO_FLOOR}
+#: Presets whose artefact is a systematic error beyond the stated floors, reported apart
+#: (set on tuning seeds before the held-out run): the imperfect lock's short holds end
+#: before the lowest level has settled, a damping error there several times the damping
+#: floor that looks like friction.
+BEYOND_FLOORS = ("lock",)
 
 
 def _baseline_p(crit) -> float:
@@ -103,10 +108,11 @@ def _figures(p: np.ndarray) -> dict:
             "median_p": float(np.median(p)), "below": _shares(p)}  # fmt: skip
 
 
-def summarise(rows: list[dict]) -> tuple[dict, list[str]]:
+def _subset(rows: list[dict], label: str) -> tuple[dict, dict, list[str]]:
+    """Figures and baselines of some rows, with their text lines."""
     last = max(r["campaign"] for r in rows)
-    lines = [f"{len(rows)} lab-rig null campaigns (seed {rows[0]['seed'][0]}, k ≤ {last}); "
-             "p-values of the calibrated decision"]  # fmt: skip
+    lines = [f"{label}: {len(rows)} lab-rig null campaigns (seed {rows[0]['seed'][0]}, "
+             f"k ≤ {last}); p-values of the calibrated decision"]  # fmt: skip
     figures, baselines = {}, {}
     for name in FLOORS:
         p = np.array([r[name]["p_value"] for r in rows])
@@ -116,13 +122,13 @@ def summarise(rows: list[dict]) -> tuple[dict, list[str]]:
             t: _figures(np.array([r[name]["p_value"] for r in rows if r["truth"] == t]))
             for t in dict.fromkeys(r["truth"] for r in rows)
         }
-        for label, f in (("", figures[name]), ("baseline ", baselines[name])):
+        for prefix, f in (("", figures[name]), ("baseline ", baselines[name])):
             shares = ", ".join(
                 f"≤ {a}: {v['count']}/{v['runs']} ({100 * v['ci95_low']:.1f}–"
                 f"{100 * v['ci95_high']:.1f} %)"
                 for a, v in f["below"].items()
             )
-            lines.append(f"{label}{name}: KS p {f['ks_p']:.3g}, median p {f['median_p']:.2f}; "
+            lines.append(f"{prefix}{name}: KS p {f['ks_p']:.3g}, median p {f['median_p']:.2f}; "
                          + shares)  # fmt: skip
         for t, f in figures[name]["by_truth"].items():
             v = f["below"]
@@ -140,6 +146,17 @@ def summarise(rows: list[dict]) -> tuple[dict, list[str]]:
         f"{100 * printed:.2g} %, measured {at_alpha['count']}/{at_alpha['runs']} "
         f"({100 * at_alpha['ci95_low']:.1f}–{100 * at_alpha['ci95_high']:.1f} %)"
     )
+    return figures, baselines, lines
+
+
+def summarise(rows: list[dict]) -> tuple[dict, list[str]]:
+    """Figures over every campaign, and over those whose artefacts the floors cover."""
+    figures, baselines, lines = _subset(rows, "all presets")
+    within = [r for r in rows if r["truth"] not in BEYOND_FLOORS]
+    if within and len(within) < len(rows):
+        inside, inside_baselines, more = _subset(within, "artefacts within the floors")
+        figures["within_floors"], baselines["within_floors"] = inside, inside_baselines
+        lines += more
     return {"figures": figures, "baselines": baselines}, lines
 
 
@@ -179,7 +196,6 @@ def main() -> None:
     result, lines = summarise(rows)
     text = "\n".join(lines)
     print(text)
-    no_floors, floors = result["figures"]["no_floors"], result["figures"]["floors"]
     summary = {
         "benchmark": "criticism_null_p_values",
         "campaigns": len(rows),
@@ -196,8 +212,16 @@ def main() -> None:
             "within the measured share's two-sided 95 % Clopper-Pearson bounds",
         },
         "meets_target": {
-            "no_floors": no_floors["uniform_not_rejected"],
-            "floors": floors["uniform_not_rejected"] or floors["printed_inside_measured"],
+            subset: {
+                "no_floors": f["no_floors"]["uniform_not_rejected"],
+                "floors": f["floors"]["uniform_not_rejected"]
+                or f["floors"]["printed_inside_measured"],
+            }
+            for subset, f in (
+                ("all", result["figures"]),
+                ("within_floors", result["figures"].get("within_floors")),
+            )
+            if f is not None
         },
         "seconds": round(time.perf_counter() - began, 1),
     }

@@ -13,9 +13,9 @@ bootstrap's p-value. Under this truth the p-value is uniform: a two-sided Kolmog
 test at 1 % over a fixed set of seeds must not reject it. The directions are synthetic
 (smooth columns of the log-amplitude), so the test does not depend on a harmonic balance.
 
-**Slow.** Lab-rig null campaigns (:func:`studies.null_study` with ``source="rig"``: time
-integration under a phase-locked loop, backbones extracted from the records), floors off:
-the same KS test; the full study is ``bench/criticism_nulls.py``.
+**Slow.** Lab-rig null campaigns (:func:`studies.nulls.null_study` with ``source="rig"``:
+time integration under a phase-locked loop, backbones extracted from the records), floors
+off: the same KS test; the full study is ``bench/criticism_nulls.py``.
 """
 
 import numpy as np
@@ -127,11 +127,16 @@ def test_null_p_values_are_uniform(n_curves):
 
 @pytest.mark.slow
 def test_rig_null_p_values_are_uniform_without_floors():
-    """30 lab-rig null campaigns (3 assemblies, 8 levels, the five artefact presets in
-    turn, tuning seeds), floors off: KS (two-sided) does not reject uniformity at 1 %."""
+    """32 lab-rig null campaigns (3 assemblies, 8 levels, tuning seeds; the artefact presets
+    whose errors the floors cover, in turn: the imperfect lock's unsettled lowest hold is a
+    damping error beyond them, reported apart by ``bench/criticism_nulls.py``), floors off:
+    KS (two-sided) does not reject uniformity at 1 %."""
     from studies.nulls import NO_FLOOR, null_study
 
-    rows = null_study(30, source="rig", seed=0, noise_floor=NO_FLOOR, n_bootstrap=500)
+    truths = ("pure", "distorted", "ripple", "dropouts")
+    rows = null_study(
+        32, source="rig", truths=truths, seed=0, noise_floor=NO_FLOOR, n_bootstrap=500
+    )
     p_values = np.array([r.p_value for r in rows])
     ks = stats.kstest(p_values, "uniform")
     assert ks.pvalue > 0.01, (ks.pvalue, np.sort(p_values))
