@@ -65,7 +65,7 @@ def firing_counts(n_curves, rho, campaigns, alpha, n_bootstrap, seed=3):
         residual = problem.metric.weights * curves.mean(axis=0)
         residual = residual + problem.base @ rng.standard_normal(problem.base.shape[1])
         metric = Metric(problem.metric.keep, problem.metric.weights, level_cov)
-        drawn = dataclasses.replace(problem, residual=residual, metric=metric)
+        drawn = dataclasses.replace(problem, residual=residual, metric=metric, curves=curves)
         observed = cal.statistics(drawn, residual[None], level_cov.mean[None], keep_frame=True)
         thresholds = cal.calibrate(drawn, observed, alpha=alpha, n_bootstrap=n_bootstrap, seed=r)
         fires += bool(

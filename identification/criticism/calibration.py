@@ -14,21 +14,27 @@ channel group (frequency, damping, harmonics) and the residual standardised leve
 level (what ``where()`` reads).
 
 **The calibration.** A parametric bootstrap under the refitted base model
-(:func:`calibrate`): whole campaigns of ``n`` curves drawn around the fitted mean with
-the estimated between-curve covariance, plus a systematic offset drawn from the floors;
-each campaign's covariance re-estimated as the analysis estimates the measured one
-(with few curves the covariance's own uncertainty matters as much as the residual's);
-the statistics computed on each. The catalogue and reference tests are combined by
-the smaller of their bootstrap p-values, calibrated so that *either* fires on a null
-campaign with probability ``α``; the ``where()`` bound, the adequacy bounds per channel
-group and of the total ``χ²`` are the ``1 − α`` quantiles of theirs. Everything is
-linear algebra on ``p × p`` matrices, so thousands of bootstrap campaigns are cheap.
+(:func:`calibrate`): whole campaigns of ``n`` curves drawn around the fitted mean like
+the measured curves (:func:`scatter`: the measured assemblies' offsets along the base
+model's own directions, plus the rest of their scatter drawn unfloored), plus a
+systematic offset drawn from the floors; each campaign's covariance re-estimated as the
+analysis estimates the measured one (shrunk and floored: with few curves the covariance's
+own uncertainty matters as much as the residual's); the statistics computed on each. The
+catalogue and reference tests are combined by the smaller of their bootstrap p-values,
+calibrated so that *either* fires on a null campaign with probability ``α``; the
+``where()`` bound, the adequacy bounds per channel group and of the total ``χ²`` are the
+``1 − α`` quantiles of theirs. The floors stand for systematic errors of the measurement
+chain; where a campaign carries less, the test is conservative, and the same bootstrap
+without the floors' draw gives its **effective level**
+(:attr:`Calibration.effective_level`). Everything is linear algebra on ``p × p``
+matrices, so thousands of bootstrap campaigns are cheap.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -82,6 +88,9 @@ class Problem:
         ``(n_levels,)`` log-amplitudes of the levels.
     variance_floor
         ``(p,)`` floor of each per-curve variance (the hold fits' standard errors).
+    curves
+        ``(n, p)`` the measured curves at the levels (kept entries, unweighted): what the
+        bootstrap's campaigns are drawn like (:func:`scatter`).
     """
 
     residual: np.ndarray
@@ -95,6 +104,7 @@ class Problem:
     group_of: np.ndarray
     positions: np.ndarray
     variance_floor: np.ndarray
+    curves: np.ndarray
 
     @classmethod
     def build(
@@ -117,6 +127,7 @@ class Problem:
         group_names = [_group(c) for c in np.array(data.channels)[kept_channels]]
         group_of = np.tile([GROUPS.index(g) for g in group_names], n_levels)
         errors = data.at_levels(data.standard_error**2)[:, :, kept_channels]
+        curves = data.curves_at_levels.reshape(data.n_curves, -1)[:, metric.keep]
         return cls(
             residual=metric.weights * residual.reshape(-1)[metric.keep],
             base=base,
@@ -129,11 +140,17 @@ class Problem:
             group_of=group_of,
             positions=np.log(data.levels_m),
             variance_floor=np.nanmean(errors, axis=0).reshape(-1),
+            curves=curves,
         )
 
     @property
     def size(self) -> int:
         return self.residual.size
+
+    @cached_property
+    def drawn_scatter(self) -> tuple[np.ndarray, np.ndarray]:
+        """What the bootstrap draws its curves like (:func:`scatter`)."""
+        return scatter(self)
 
     def weighted(self, covariance: np.ndarray) -> np.ndarray:
         """The covariance of weighted residual entries, ``D_w V D_w``."""
@@ -289,6 +306,11 @@ class Calibration:
         within them fits within the scatter.
     null_catalogue, null_reference
         The bootstrap's statistics (for p-values and their spread).
+    effective_level
+        Probability that the decision fires on a null campaign whose measurement chain adds
+        no systematic error (the floors stated, none drawn): the level the test holds where
+        the floors are larger than the errors they stand for (``alpha`` without floors).
+        Measured on lab-rig nulls by ``bench/criticism_nulls.py``.
     seconds
         Time taken.
     """
@@ -304,6 +326,7 @@ class Calibration:
     chi2_bound: float
     null_catalogue: np.ndarray
     null_reference: np.ndarray
+    effective_level: float
     seconds: float
 
     def p_value(self, catalogue: float, reference: float) -> float:
@@ -324,6 +347,7 @@ class Calibration:
             "where": self.where_bound,
             "channels": dict(self.channel_bounds),
             "chi2": self.chi2_bound,
+            "effective_level": self.effective_level,
             "seconds": self.seconds,
         }
 
@@ -334,14 +358,59 @@ def _upper_p(values: np.ndarray) -> np.ndarray:
     return (values.size - np.searchsorted(order, values, side="left")) / values.size
 
 
-def simulate(problem: Problem, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def scatter(problem: Problem) -> tuple[np.ndarray, np.ndarray]:
+    """What the bootstrap draws its curves like: ``(n, p)`` each measured curve's offsets
+    along the base model's directions and the ``(p, p)`` covariance of the rest of its
+    scatter (unweighted, kept entries).
+
+    Each curve's deviation from the mean is split into the part the base model's own
+    parameters take (its assembly's offsets: a generalised least-squares fit of the base
+    directions in the likelihood's metric) and the rest. A bootstrap campaign keeps the
+    measured offsets (the refit takes them out of every statistic; they matter only through
+    the covariance re-estimated from the curves, which they inflate) and draws the rest
+    from the shrinkage estimate of its own covariance, *without* the hold fits' variance
+    floor; the analysis' estimator (shrunk, floored) then runs on the drawn curves as it
+    ran on the measured ones. The analysis' estimate itself is the wrong thing to draw
+    from: shrinkage spreads the offsets, which lie along the model's own directions, into
+    every direction, and the floor puts noise where the curves show none; a bootstrap drawn
+    from it scatters more than the data off the model's directions, and its p-values pile
+    at 1. One curve: no offsets, its within-curve noise
+    (:func:`~identification.fitting.covariance.estimate`), unfloored.
+    """
+    curves = problem.curves
+    n, p = curves.shape
+    unfloored = np.zeros(p)
+    if n == 1:
+        noise = cov.estimate(curves[None], problem.channel_of, problem.positions, unfloored)[0]
+        return np.zeros((1, p)), noise[0]
+    weights = problem.metric.weights
+    deviation = curves - curves.mean(axis=0)
+    factor = np.linalg.cholesky(problem.weighted(problem.metric.covariance.mean))
+    white_base = solve_triangular(factor, problem.base, lower=True)
+    white_deviation = solve_triangular(factor, (weights * deviation).T, lower=True)
+    offsets = np.linalg.lstsq(white_base, white_deviation, rcond=None)[0].T  # (n, k)
+    along = offsets @ problem.base.T / weights
+    rest = deviation - along
+    noise = cov.estimate(rest[None], problem.channel_of, problem.positions, unfloored)[0][0]
+    return along, noise
+
+
+def simulate(
+    problem: Problem, n: int, rng: np.random.Generator, systematic: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
     """``n`` null campaigns: weighted mean residuals ``(n, p)`` and their re-estimated
-    covariances of the mean ``(n, p, p)``."""
+    covariances of the mean ``(n, p, p)`` (curves drawn from :func:`scatter`, the covariance
+    re-estimated as the analysis estimates the measured one). ``systematic``: the mean
+    carries an error drawn from the systematic floors (else none; the floors stay in the
+    covariance, as the analysis states them)."""
     covariance = problem.metric.covariance
     p, curves = problem.size, covariance.n_curves
-    per_curve = covariance.per_curve + 1e-12 * np.diag(np.diag(covariance.per_curve))
-    draws = rng.standard_normal((n, curves, p)) @ np.linalg.cholesky(per_curve).T
-    mean = draws.mean(axis=1) + rng.standard_normal((n, p)) * np.sqrt(covariance.floor)
+    along, noise = problem.drawn_scatter
+    noise = noise + 1e-12 * np.diag(np.maximum(np.diag(noise), np.diag(covariance.per_curve)))
+    draws = along + rng.standard_normal((n, curves, p)) @ np.linalg.cholesky(noise).T
+    mean = draws.mean(axis=1)
+    if systematic:
+        mean += rng.standard_normal((n, p)) * np.sqrt(covariance.floor)
     extra = np.asarray(covariance.extra)
     if extra.ndim == 2:  # low rank (a posterior of a few parameters): a square root by eigh
         values, vectors = np.linalg.eigh(extra)
@@ -376,6 +445,22 @@ def calibrate(
     # Either test fires: min of the two p-values, its α quantile sets each test's level.
     combined = np.minimum(_upper_p(catalogue), _upper_p(reference))
     level = float(np.quantile(combined, alpha, method="inverted_cdf"))
+    catalogue_threshold = float(np.quantile(catalogue, 1 - level))
+    reference_threshold = float(np.quantile(reference, 1 - level))
+    effective = alpha
+    if np.any(problem.metric.covariance.floor > 0):
+        # The same campaigns less the floors' draw: how often such a campaign fires.
+        fired = 0
+        for first in range(0, n_bootstrap, _BATCH):
+            residual, covariance = simulate(
+                problem, min(_BATCH, n_bootstrap - first), rng, systematic=False
+            )
+            quiet = statistics(problem, residual, covariance, observed.reference_rank)
+            fires = (quiet.catalogue > catalogue_threshold) | (
+                quiet.reference > reference_threshold
+            )
+            fired += int(np.sum(fires))
+        effective = fired / n_bootstrap
     channel = np.concatenate([s.channel_chi2 for s in parts])
     bounds = {
         g: float(np.quantile(channel[:, i], 1 - alpha))
@@ -387,8 +472,8 @@ def calibrate(
         n_bootstrap=n_bootstrap,
         seed=seed,
         level_each=level,
-        catalogue_threshold=float(np.quantile(catalogue, 1 - level)),
-        reference_threshold=float(np.quantile(reference, 1 - level)),
+        catalogue_threshold=catalogue_threshold,
+        reference_threshold=reference_threshold,
         where_bound=float(
             np.quantile(np.concatenate([s.where_statistic for s in parts]), 1 - alpha)
         ),
@@ -396,5 +481,6 @@ def calibrate(
         chi2_bound=float(np.quantile(np.concatenate([s.chi2 for s in parts]), 1 - alpha)),
         null_catalogue=catalogue,
         null_reference=reference,
+        effective_level=effective,
         seconds=time.perf_counter() - start,
     )

@@ -120,7 +120,8 @@ def summary(crit: Criticism) -> str:
     lines.append(
         f"decision: catalogue gain Δχ² {obs.catalogue[0]:.4g} (threshold "
         f"{cal_.catalogue_threshold:.3g}), free-form gain {obs.reference[0]:.4g} (threshold "
-        f"{cal_.reference_threshold:.3g}, {obs.reference_rank} dof); α = {crit.alpha:g}, "
+        f"{cal_.reference_threshold:.3g}, {obs.reference_rank} dof); α = {crit.alpha:g} "
+        f"(effective level {cal_.effective_level:.2g} if the chain adds no systematic error), "
         f"{cal_.n_bootstrap} bootstrap campaigns, p = {crit.p_value:.2g}; where-bound "
         f"{cal_.where_bound:.2f} standard errors"
     )
