@@ -33,7 +33,9 @@ searching many columns at one level.
 
 **Sources.** ``"lab"``: the lab rig (:mod:`identification.rig`, the ``lab-hidden-*``
 preset of the effect with its size scaled; the drive levels are the preset's, as a lab
-keeps its test plan).
+keeps its test plan). ``"independent"``: the same truth built from its numbers in the
+independent simulator (:func:`independent.phase_resonance_campaign`: its own forces and
+harmonic balance, no kernel of the library), 10 levels 0.05–2 mm.
 """
 
 from __future__ import annotations
@@ -49,13 +51,14 @@ from scipy import optimize, stats
 
 from identification.criticism.criticism import Criticism, criticize
 from identification.criticism.oracle import oracle
-from identification.effects import LINEAR_STIFFNESS
+from identification.effects import LINEAR_STIFFNESS, VISCOUS_DAMPING
 from identification.fitting.fitter import Fitter
 from identification.measurements.backbone import BackboneSet
 from identification.measurements.extraction import extract_backbones
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS, rig_for_preset
 from identification.rig.presets import LAB_HIDDEN_SCENARIOS, lab_hidden_scenario
+from independent import CATALOGUE_FORCES, JointSpec, phase_resonance_campaign
 from studies.rows import Row
 
 __all__ = [
@@ -141,13 +144,38 @@ def lab_campaign(effect: str, size: float, seed: int) -> tuple[BackboneSet, Join
         name = f"Config{rig.config}_PRT_Assemb{a}"
         records.append(rig.simulate(drawn, gain, np.random.default_rng([seed, a, 1]), name))
     measured = extract_backbones(records)
-    start = Fitter.from_backbones(measured.without_harmonics()).fit(base).model
-    return measured, start
+    return measured, _first_fit(measured, base)
+
+
+def _first_fit(measured: BackboneSet, base: JointModel) -> JointModel:
+    return Fitter.from_backbones(measured.without_harmonics()).fit(base).model
+
+
+def independent_joint(model: JointModel) -> JointSpec:
+    """A catalogue model's physics as the independent simulator builds it from its numbers."""
+    p = model.parameters
+    omega0 = math.sqrt(p[LINEAR_STIFFNESS])
+    terms = []
+    for effect in model.effects:
+        if effect in (LINEAR_STIFFNESS, VISCOUS_DAMPING):
+            continue
+        shape = {k.split(".", 1)[1]: v for k, v in p.items() if k.startswith(f"{effect}.")}
+        terms.append(CATALOGUE_FORCES[effect](p[effect], **shape))
+    return JointSpec(omega0 / (2 * math.pi), p[VISCOUS_DAMPING] / (2 * omega0), tuple(terms))
+
+
+def independent_campaign(effect: str, size: float, seed: int) -> tuple[BackboneSet, JointModel]:
+    """An independent-simulator campaign of the truth :func:`lab_campaign` draws (its
+    default population scatter and hold noise), and the start fitted to it."""
+    truth, base = scaled_truth(effect, size)
+    measured = phase_resonance_campaign(independent_joint(truth), ASSEMBLIES, seed)
+    return measured, _first_fit(measured, base)
 
 
 #: The data sources: ``(effect, size, seed) -> (measured backbones, start model)``.
 SOURCES: dict[str, Callable[[str, float, int], tuple[BackboneSet, JointModel]]] = {
     "lab": lab_campaign,
+    "independent": independent_campaign,
 }
 
 
