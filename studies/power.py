@@ -65,6 +65,7 @@ __all__ = [
     "ASSEMBLIES",
     "HELD_OUT_SEED",
     "POWER",
+    "REPORTED_SEED",
     "SIZE_RATIO",
     "SIZE_STEPS",
     "SOURCES",
@@ -83,12 +84,16 @@ __all__ = [
 
 #: First held-out seed (the studies' convention; ``studies/seeds.py`` when it lands).
 HELD_OUT_SEED = 1_000_000
+#: First seed of the reported campaigns: the block from :data:`HELD_OUT_SEED` was seen
+#: while the grid's rule changed (from a 2-seed pilot's mean gain to :func:`anchor_size`'s
+#: rule, a ratio 1.5 to :data:`SIZE_RATIO`), so the reported block moved to the next.
+REPORTED_SEED = 2_000_000
 #: The power the 80 %-size is read at.
 POWER = 0.8
 #: Ratio of adjacent sizes of the grid, and the grid's steps around the anchor: sizes
 #: ``anchor · SIZE_RATIO**k``; at the lowest the oracle's power is about α, at the highest
 #: both tests' is about 1 when the search's price is below 1.5.
-SIZE_RATIO = 1.5
+SIZE_RATIO = 1.6
 SIZE_STEPS = (-2, -1, 0, 1, 2)
 #: Assemblies, levels per record and hold time of a lab campaign (the hidden-effect study's).
 ASSEMBLIES = 3
@@ -96,7 +101,7 @@ LEVELS = 8
 HOLD_S = 2.5
 #: Size and tuning seeds of the pilot that places an effect's grid (:func:`anchor_size`).
 PILOT_SIZE = 0.1
-PILOT_SEEDS = (0, 1)
+PILOT_SEEDS = (0, 1, 2, 3, 4)
 #: Campaign resamples of the 80 %-size intervals.
 N_RESAMPLES = 2000
 
@@ -303,12 +308,16 @@ def lambda_at_power(threshold: float, power: float = POWER) -> float:
 
 def anchor_size(pilot: Sequence[PowerRow]) -> float:
     """The size at which the oracle is expected to have :data:`POWER`, from pilot rows
-    (tuning seeds, one size): ``λ ∝ size²`` with ``λ`` estimated as ``gain − 1`` (the mean
-    of ``χ²₁(λ)`` is ``λ + 1``), averaged over the pilot."""
-    size = pilot[0].size
-    lam = max(float(np.mean([r.oracle_gain for r in pilot])) - 1.0, 1.0)
-    threshold = float(np.median([r.oracle_threshold for r in pilot]))
-    return size * math.sqrt(lambda_at_power(threshold) / lam)
+    (tuning seeds, one size). Per campaign, ``λ ∝ size²`` with ``λ`` estimated as
+    ``gain − 1`` (the mean of ``χ²₁(λ)`` is ``λ + 1``) gives the size at which that
+    campaign's gain would reach the 80 %-power ``λ`` of its threshold; ``λ`` itself varies
+    from campaign to campaign (the covariance of few curves is estimated), so the anchor is
+    the :data:`POWER` quantile of those sizes."""
+    sizes = [
+        r.size * math.sqrt(lambda_at_power(r.oracle_threshold) / max(r.oracle_gain - 1.0, 1.0))
+        for r in pilot
+    ]
+    return float(np.quantile(sizes, POWER))
 
 
 def size_grid(anchor: float) -> list[float]:
