@@ -4,8 +4,8 @@ For each catalogue effect: a pilot on tuning seeds (:data:`studies.power.PILOT_S
 effect at :data:`studies.power.PILOT_SIZE` of its hidden scenario's truth) places a
 geometric grid of sizes around the size at which the oracle should have 80 % power
 (:func:`studies.power.anchor_size`); then ``--campaigns`` campaigns per size, seeds from
-``--seed-start`` (held out: from 2 000 000, :data:`studies.power.REPORTED_SEED`), each criticised from the base model (round 1)
-and tested by the oracle told which effect to look for (:mod:`studies.power` states the
+``--seed-start`` (held out: from 2 000 000, :data:`studies.power.REPORTED_SEED`), each
+criticised from the base model (round 1) and tested by the oracle told which effect to look for (:mod:`studies.power` states the
 outcome rules). Every size of one seed shares its assemblies.
 
 Rows are appended to ``--rows`` as they are done and rows already there are skipped, so a
