@@ -6,7 +6,8 @@ geometric grid of sizes around the size at which the oracle should have 80 % pow
 (:func:`studies.power.anchor_size`); then ``--campaigns`` campaigns per size, seeds from
 ``--seed-start`` (held out: from 2 000 000, :data:`studies.power.REPORTED_SEED`), each
 criticised from the base model (round 1) and tested by the oracle told which effect to
-look for (:mod:`studies.power` states the outcome rules). Every size of one seed shares its assemblies.
+look for (:mod:`studies.power` states the outcome rules). Every size of one seed shares
+its assemblies.
 
 Rows are appended to ``--rows`` as they are done and rows already there are skipped, so a
 long run goes in pieces (several processes may share the file). The summary — per effect
