@@ -242,6 +242,15 @@ class PowerRow(Row):
         return self.outcome == "wrong"
 
     @property
+    def fires(self) -> bool:
+        """Diagnostic (added after the first rows, not an outcome rule): the search's
+        calibrated tests fire, catalogue or free-form, before ``where()``, refits and groups."""
+        return (
+            self.catalogue_gain > self.catalogue_threshold
+            or self.reference_gain > self.reference_threshold
+        )
+
+    @property
     def oracle_detects(self) -> bool:
         return self.oracle_gain > self.oracle_threshold
 
@@ -366,6 +375,9 @@ class Curve:
         Grid sizes (ascending) and campaigns at each.
     search, oracle, wrong
         Per size: share named, share the oracle detects, wrong-effect count.
+    fires, size80_fires
+        Per size, the share where the search's calibrated tests fire (:attr:`PowerRow.fires`),
+        and its 80 %-size: the search before ``where()``, refits and groups.
     wrong_upper
         Per size: one-sided 95 % Clopper–Pearson upper bound of the wrong-effect rate.
     size80_search, size80_oracle, ratio
@@ -384,6 +396,8 @@ class Curve:
     oracle: list[float]
     wrong: list[int]
     wrong_upper: list[float]
+    fires: list[float]
+    size80_fires: float
     size80_search: float
     size80_oracle: float
     ratio: float
@@ -413,6 +427,7 @@ def power_curve(rows: Sequence[PowerRow], seed: int = 0) -> Curve:
     named = [np.array([r.named for r in group]) for group in by_size]
     detected = [np.array([r.oracle_detects for r in group]) for group in by_size]
     wrong = [sum(r.wrong for r in group) for group in by_size]
+    fires = [float(np.mean([r.fires for r in group])) for group in by_size]
     search = [float(x.mean()) for x in named]
     orc = [float(x.mean()) for x in detected]
     s80, o80 = size_at_power(sizes, search), size_at_power(sizes, orc)
@@ -439,6 +454,8 @@ def power_curve(rows: Sequence[PowerRow], seed: int = 0) -> Curve:
         oracle=orc,
         wrong=wrong,
         wrong_upper=[wrong_upper(w, len(g)) for w, g in zip(wrong, by_size, strict=True)],
+        fires=fires,
+        size80_fires=size_at_power(sizes, fires),
         size80_search=s80,
         size80_oracle=o80,
         ratio=_ratio(s80, o80),
