@@ -98,6 +98,9 @@ def _summary(curve: Curve, anchor: float) -> dict:
         "oracle_power": curve.oracle,
         "fires": curve.fires,
         "size80_fires": curve.size80_fires,
+        "ratio_fires": curve.size80_fires / curve.size80_oracle
+        if 0 < curve.size80_oracle < math.inf
+        else math.nan,
         "wrong": curve.wrong,
         "wrong_upper": curve.wrong_upper,
         "max_wrong_upper": max(curve.wrong_upper),
@@ -142,7 +145,7 @@ def _text(s: dict) -> str:
         f"{s['ratio']:.3g} {_pair(s['ratio_interval'])}, expected from the thresholds "
         f"{s['expected_ratio']:.3g} (median χ² thresholds {s['search_threshold']:.3g} / "
         f"{s['oracle_threshold']:.3g}); the calibrated tests alone fire in 80 % at "
-        f"{s['size80_fires']:.4g}"
+        f"{s['size80_fires']:.4g} (ratio {s['ratio_fires']:.3g})"
     )
     return "\n".join(lines)
 
@@ -157,11 +160,12 @@ def plot(rows: list[PowerRow], png: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
     groups = sorted({(r.effect, r.source) for r in rows})
     columns = min(4, len(groups))
     lines = math.ceil(len(groups) / columns)
-    fig, axes = plt.subplots(lines, columns, figsize=(3.2 * columns, 2.6 * lines), squeeze=False)
+    fig, axes = plt.subplots(lines, columns, figsize=(3.8 * columns, 3.0 * lines), squeeze=False)
     for ax, (effect, source) in zip(axes.flat, groups, strict=False):
         curve = power_curve([r for r in rows if (r.effect, r.source) == (effect, source)])
         styles = (
@@ -180,6 +184,7 @@ def plot(rows: list[PowerRow], png: Path) -> None:
         ax.plot(curve.sizes, wrong, "x:", color="red", label="wrong effect")
         ax.axhline(0.8, color="grey", lw=0.5)
         ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_ylim(-0.03, 1.03)
         ax.set_title(f"{effect} ({source})", fontsize=9)
         ax.set_xlabel("size (× hidden-scenario truth)", fontsize=8)
@@ -187,7 +192,7 @@ def plot(rows: list[PowerRow], png: Path) -> None:
     for ax in list(axes.flat)[len(groups) :]:
         ax.set_visible(False)
     axes.flat[0].set_ylabel("probability", fontsize=8)
-    axes.flat[0].legend(fontsize=7)
+    axes.flat[0].legend(fontsize=6, loc="upper left")
     fig.tight_layout()
     fig.savefig(png, dpi=110)
 
@@ -231,7 +236,7 @@ def main() -> None:
         print(_text(summary), flush=True)
         summaries.append(summary)
     keys = ("size80_search", "size80_oracle", "ratio", "ratio_interval", "expected_ratio",
-            "size80_fires", "max_wrong_upper", "campaigns")  # fmt: skip
+            "size80_fires", "ratio_fires", "max_wrong_upper", "campaigns")  # fmt: skip
     figures = {
         "bench": "criticism_power",
         "source": args.source,

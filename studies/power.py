@@ -440,7 +440,8 @@ def power_curve(rows: Sequence[PowerRow], seed: int = 0) -> Curve:
         draws[b] = s, o, _ratio(s, o)
 
     def interval(column: int) -> tuple[float, float]:
-        low, high = np.nanquantile(draws[:, column], [0.025, 0.975])
+        # no interpolation: a size not reached on the grid (inf) stays inf
+        low, high = np.nanquantile(draws[:, column], [0.025, 0.975], method="inverted_cdf")
         return float(low), float(high)
 
     t_search = float(np.median([r.catalogue_threshold for r in rows]))
