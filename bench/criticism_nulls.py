@@ -41,9 +41,8 @@ from identification.criticism.criticism import ALPHA, N_BOOTSTRAP, criticize
 from identification.rig import RIG_PRESETS
 from studies import clopper_pearson
 from studies.nulls import LAB_DRIFT_TRUTHS, LAB_NULL_TRUTHS, NO_FLOOR, rig_campaign
+from studies.seeds import HELD_OUT_SEED
 
-#: First held-out seed (COMMON.md; ``studies.seeds.HELD_OUT_SEED`` once it is on main).
-HELD_OUT_SEED = 1_000_000
 LEVELS = (0.01, 0.05, 0.1)
 KS_LEVEL = 0.01
 RESULTS = Path(__file__).parent / "results"
