@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from identification.effects import CATALOGUE
+from identification.measurements.modal_filter import SECOND_MODE_SHARE
 from identification.measurements.quantities import EXCITATION_KINDS, QUANTITIES, TEST_TYPES
 from identification.measurements.signals import DECAY_EDGE_PERIODS
 from identification.model import PRESETS, JointModel
@@ -99,7 +100,9 @@ def add_record_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--test", choices=TEST_TYPES, default="phase-resonance",
                        help="test type (default phase-resonance: PLL holds)")  # fmt: skip
     group.add_argument("--time", metavar="NAME", help="time column (default: time or t)")
-    group.add_argument("--response", metavar="NAME", help="response column")
+    group.add_argument("--response", metavar="NAME[,NAME…]",
+                       help="response column; several, comma-separated, are the sensors of a "
+                       "multi-point record (the first is the one-mode response)")  # fmt: skip
     group.add_argument("--quantity", choices=QUANTITIES,
                        help="what the response is (default: from its name)")  # fmt: skip
     group.add_argument("--relative-response", action="store_true",
@@ -226,11 +229,46 @@ def _cmd_backbones(args: argparse.Namespace) -> None:
 
     workspace = Workspace(args.dir, backbones_csv=args.out, n_periods=args.periods,
                           **_workspace_options(args))  # fmt: skip
-    backbones = campaign_backbones(workspace)
+    if args.modes > 1:
+        _modal_backbones(workspace, args)
+        return
+    backbones = campaign_backbones(workspace, mode_shapes=args.mode_shapes,
+                                   second_mode_share=args.second_mode_share)  # fmt: skip
     points = sum(len(b) for b in backbones)
     print(f"extracted {len(backbones)} backbone(s), {points} points ({args.test}) to "
           f"{workspace.backbones_csv}")  # fmt: skip
     print(extraction_summary(backbones))
+
+
+def _modal_backbones(workspace, args: argparse.Namespace) -> None:
+    from identification.measurements.modal_backbones import sidecar_path
+    from pm_joint.pipeline import campaign_modal_backbones
+
+    result = campaign_modal_backbones(workspace, args.modes, mode_shapes=args.mode_shapes)
+    holds = sum(len(c.holds) for c in result)
+    print(f"extracted {len(result)} record(s) × {args.modes} modes, {holds} holds ({args.test}) "
+          f"to {workspace.backbones_csv} (sensors and shapes: "
+          f"{sidecar_path(workspace.backbones_csv)})")  # fmt: skip
+    for curve in result:
+        f = curve.modal_filter
+        worst = int(curve.reconstruction_error.argmax())
+        print(
+            f"{curve.label}: locked mode {curve.locked_mode} of "
+            + ", ".join(f"{x:.5g}" for x in f.frequencies_hz)
+            + f" Hz; shapes {f.source}; complex-to-real error up to {f.alignment_error.max():.2g}"
+            f"; reconstruction error up to {curve.reconstruction_error[worst]:.2g} "
+            f"({f.sensor_names[worst]})"
+        )
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"needs an integer ≥ 1, got {text!r}")
+    return value
 
 
 def _cmd_identify(args: argparse.Namespace) -> None:
@@ -407,6 +445,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dir", help=records)
     p.add_argument("--out", help="CSV file (default DIR/backbones.csv, FILE_backbones.csv)")
     p.add_argument("--periods", type=int, default=70, help="periods per hold (default 70)")
+    p.add_argument(
+        "--modes", type=_positive_int, default=1, metavar="N",
+        help="modes read per record (default 1: one backbone per record); 2 or more: a backbone "
+        "per mode by the modal filter of the sensors (TRC panel points, --response a,b,c), "
+        "a `mode` column and every mode's participation in the CSV",
+    )  # fmt: skip
+    p.add_argument(
+        "--mode-shapes", metavar="FILE",
+        help="mode shapes at the sensors: one row per sensor (the --response columns in order, "
+        "or the 15 TRC panel points), then a row of frequencies (Hz) (default: the TRC modes "
+        "file, else estimated from the records)",
+    )  # fmt: skip
+    p.add_argument(
+        "--second-mode-share", type=float, default=SECOND_MODE_SHARE, metavar="FRACTION",
+        help="with one mode read, warn of a record whose given shapes show another mode above "
+        f"this share of the energy (default {SECOND_MODE_SHARE:g})",
+    )  # fmt: skip
     add_record_options(p)
     p.set_defaults(func=_cmd_backbones)
 

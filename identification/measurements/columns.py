@@ -90,7 +90,11 @@ class ColumnLayout:
         Time column (s); default a column named ``time`` or ``t``, else a scalar
         sampling rate.
     response
-        Response column; default the one column no other role takes.
+        Response column; default the one column no other role takes. Several,
+        comma-separated (``a,b,c``), are the sensors of a multi-point record: the
+        first is the response of a one-mode reading, all of them go into the
+        modal filter of a reading of several modes
+        (:mod:`identification.measurements.modal_filter`).
     quantity
         ``displacement``, ``velocity`` or ``acceleration`` of the response (SI);
         default from the response's name when it says (``disp…``, ``vel…``, ``acc…``).
@@ -196,6 +200,9 @@ class ColumnRecord:
         Modal forcing gain (1/kg) of a force-driven test when known.
     path
         The file it was read from.
+    extra_responses, extra_response_names
+        The other sensors' responses (same quantity and reference as ``response``)
+        and their column names, for several modes; empty for one sensor.
     time_jitter
         Largest step deviation of the time stamps from their mean step (fraction
         of it) where they were replaced by the uniform grid, else 0.
@@ -224,6 +231,8 @@ class ColumnRecord:
     relative: bool = False
     stated_forcing_gain: float | None = None
     path: Path | None = None
+    extra_responses: tuple[np.ndarray, ...] = ()
+    extra_response_names: tuple[str, ...] = ()
     time_jitter: float = field(default=0.0, init=False)
 
     def __post_init__(self) -> None:
@@ -237,6 +246,11 @@ class ColumnRecord:
             arrays[self.excitation_name or "excitation"] = frozen_array(self.excitation)
         if self.frequency_channel is not None:
             arrays["frequency"] = frozen_array(self.frequency_channel)
+        extra_names = tuple(self.extra_response_names)
+        if len(extra_names) != len(self.extra_responses):
+            raise ValueError(f"{where}: one name per extra response, got {extra_names}")
+        for name, values in zip(extra_names, self.extra_responses, strict=True):
+            arrays[name] = frozen_array(values)
         for name, values in arrays.items():
             if values.ndim != 1 or values.size != time.size:
                 raise ValueError(
@@ -259,6 +273,8 @@ class ColumnRecord:
             object.__setattr__(self, "excitation", arrays[self.excitation_name or "excitation"])
         if self.frequency_channel is not None:
             object.__setattr__(self, "frequency_channel", arrays["frequency"])
+        object.__setattr__(self, "extra_responses", tuple(arrays[n] for n in extra_names))
+        object.__setattr__(self, "extra_response_names", extra_names)
         if np.all(self.response == self.response[0]):
             raise ValueError(f"{where}: the response {self.response_name!r} is constant")
         if self.test != "free-decay":
@@ -331,16 +347,34 @@ class ColumnRecord:
         integrated (trapezoidal rule, linear trend off); an absolute response of a
         base-driven test has the base velocity taken off.
         """
+        return self._relative_velocity(self.response)
+
+    def _relative_velocity(self, response: np.ndarray) -> np.ndarray:
         rate = self.sampling_rate_hz
         if self.quantity == "displacement":
-            velocity = central_difference(self.response, rate)
+            velocity = central_difference(response, rate)
         elif self.quantity == "acceleration":
-            velocity = _detrended_integral(self.response, rate)
+            velocity = _detrended_integral(response, rate)
         else:
-            velocity = self.response
+            velocity = response
         if self.base_driven and not self.relative:
             velocity = velocity - self.excitation_velocity
         return velocity
+
+    @property
+    def sensor_names(self) -> tuple[str, ...]:
+        """Names of the response columns: the response's, then the other sensors'."""
+        return (self.response_name, *self.extra_response_names)
+
+    @property
+    def sensor_responses(self) -> np.ndarray:
+        """``(n, S)`` every sensor's response as measured (first column: :attr:`response`)."""
+        return np.column_stack([self.response, *self.extra_responses])
+
+    @cached_property
+    def sensor_velocity(self) -> np.ndarray:
+        """``(n, S)`` every sensor's velocity relative to the base, as :attr:`response_velocity`."""
+        return np.column_stack([self._relative_velocity(r) for r in self.sensor_responses.T])
 
     @cached_property
     def forcing_gain(self) -> float | None:
@@ -361,7 +395,7 @@ class ColumnRecord:
     @property
     def data(self) -> np.ndarray:
         """The samples as one array (time, response[, excitation][, frequency]), for sizes."""
-        columns = [self.time_s, self.response]
+        columns = [self.time_s, self.response, *self.extra_responses]
         columns += [c for c in (self.excitation, self.frequency_channel) if c is not None]
         return np.column_stack(columns)
 
@@ -471,7 +505,13 @@ def _read_columns(path: str | Path, layout: ColumnLayout | None) -> ColumnRecord
             taken.add(excitation_key)
     frequency_key = role(layout.frequency, "frequency", (), ("freq",))
     level_key = role(layout.level, "level", (), ("level",))
-    response_key = role(layout.response, "response")
+    named = [n.strip() for n in (layout.response or "").split(",") if n.strip()]
+    response_key = role(named[0] if named else None, "response")
+    extra_keys = [role(name, "response") for name in named[1:]]
+    sensors = [response_key, *extra_keys]
+    twice = sorted({k for k in sensors if sensors.count(k) > 1})
+    if twice:
+        raise ValueError(f"{path}: response column(s) {twice} named twice in --response")
     if response_key is None:
         left = [k for k in vectors if k not in taken]
         if len(left) != 1:
@@ -527,6 +567,8 @@ def _read_columns(path: str | Path, layout: ColumnLayout | None) -> ColumnRecord
         relative=layout.relative,
         stated_forcing_gain=layout.forcing_gain,
         path=path,
+        extra_responses=tuple(vectors[k] for k in extra_keys),
+        extra_response_names=tuple(k.rsplit("/", 1)[-1] for k in extra_keys),
     )
 
 
@@ -542,6 +584,8 @@ def write_columns(record: ColumnRecord, path: str | Path, level: np.ndarray | No
     path = Path(path)
     response = (record.response, UNITS[record.quantity], record.quantity)
     columns = {"time": (record.time_s, "s", "time"), record.response_name: response}
+    for name, values in zip(record.extra_response_names, record.extra_responses, strict=True):
+        columns[name] = (values, UNITS[record.quantity], record.quantity)
     if record.excitation is not None:
         columns[record.excitation_name or "excitation"] = (
             record.excitation, UNITS[record.excitation_kind], record.excitation_kind)  # fmt: skip

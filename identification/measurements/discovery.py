@@ -138,6 +138,12 @@ class Campaign(RecordFiles):
             self._shared[config] = (read_steps(files["steps"], decimal_comma=comma), modes)
         return self._shared[config]
 
+    def config_modes(self) -> dict[str, Modes | None]:
+        """The linear modes of each configuration of the campaign (None: no modes file), read
+        without reading a data file."""
+        configs = {name_part(p.name, "config") for p in self.paths}
+        return {config: self._config_inputs(config)[1] for config in sorted(configs)}
+
     def _read(self, index: int) -> Record:
         path = self.paths[index]
         steps, modes = self._config_inputs(name_part(path.name, "config"))

@@ -1,8 +1,10 @@
-"""Linear modes of a test configuration, at the panel points.
+"""Linear modes of a test configuration, at the panel points (or at any sensors).
 
 Modes file ``ConfigN_linear_complex_modes``: 16 rows; rows 1-15 the mode
 shapes at the panel points (one column per mode, column 1 the first bending
-mode), row 16 the natural frequencies (Hz). Entries are real numbers or complex
+mode), row 16 the natural frequencies (Hz). A mode-shape file of a column
+layout's sensors (``--mode-shapes``) is the same with one row per sensor, in
+the order of the response columns, then the frequencies. Entries are real numbers or complex
 numbers written ``a+bj`` or ``a+bi`` (the MATLAB form; no blanks inside a
 number); with ``pairs=True`` each mode is instead a pair of columns, real part
 then imaginary part. Comment lines, a header of labels, the delimiter and a
@@ -26,7 +28,11 @@ __all__ = ["Modes", "read_modes"]
 
 @dataclass(frozen=True, eq=False)
 class Modes:
-    """Linear modes at the 15 panel points: ``shapes`` (15, m) and ``frequencies_hz`` (m,)."""
+    """Linear modes at the measurement points: ``shapes`` (points, m) and ``frequencies_hz`` (m,).
+
+    The TRC layout's are at its 15 panel points
+    (:class:`~identification.measurements.record.Record` checks it).
+    """
 
     shapes: np.ndarray
     frequencies_hz: np.ndarray
@@ -38,9 +44,9 @@ class Modes:
         freqs = frozen_array(self.frequencies_hz)
         if shapes.ndim == 1:
             shapes = frozen_array(shapes[:, None], dtype=complex)
-        if shapes.shape[0] != N_PANEL_POINTS or freqs.shape != (shapes.shape[1],):
+        if shapes.shape[0] < 1 or freqs.shape != (shapes.shape[1],):
             raise ValueError(
-                f"{where}: expected {N_PANEL_POINTS} shape rows and one frequency per mode, "
+                f"{where}: expected shape rows and one frequency per mode, "
                 f"got shapes {shapes.shape} and frequencies {freqs.shape}"
             )
         if not (np.isfinite(shapes).all() and np.isfinite(freqs).all()) or (freqs <= 0).any():
@@ -64,7 +70,12 @@ class Modes:
         return "\n".join(rows) + "\n"
 
 
-def read_modes(path: str | Path, pairs: bool = False, decimal_comma: bool | None = None) -> Modes:
+def read_modes(
+    path: str | Path,
+    pairs: bool = False,
+    decimal_comma: bool | None = None,
+    points: int | None = N_PANEL_POINTS,
+) -> Modes:
     """Read a modes file ``ConfigN_linear_complex_modes`` (see the module notes).
 
     Parameters
@@ -75,6 +86,9 @@ def read_modes(path: str | Path, pairs: bool = False, decimal_comma: bool | None
         Columns are (real, imaginary) pairs instead of one complex number each.
     decimal_comma
         Numbers written ``0,5``; None detects it.
+    points
+        Shape rows expected (the TRC layout's 15 panel points); None takes every
+        row but the last (a mode-shape file of a column layout's sensors).
     """
     path = Path(path)
     if not path.is_file():
@@ -94,10 +108,11 @@ def read_modes(path: str | Path, pairs: bool = False, decimal_comma: bool | None
                 rows.append([layout.complex_number(f) for f in fields])
             except ValueError:
                 raise ValueError(f"{path}: line {number}: non-numeric value in {fields}") from None
-    if len(rows) != N_PANEL_POINTS + 1:
+    expected = len(rows) if points is None else points + 1
+    if len(rows) != expected or len(rows) < 2:
         raise ValueError(
-            f"{path}: found {len(rows)} rows, expected {N_PANEL_POINTS + 1} "
-            f"({N_PANEL_POINTS} mode-shape rows and one frequency row)"
+            f"{path}: found {len(rows)} rows, expected {expected if points else 'at least 2'} "
+            f"({points or 'one or more'} mode-shape rows and one frequency row)"
         )
     table = np.array(rows)
     if pairs:
@@ -106,5 +121,5 @@ def read_modes(path: str | Path, pairs: bool = False, decimal_comma: bool | None
         table = table.real[:, 0::2] + 1j * table.real[:, 1::2]
     freqs = table[-1]
     if np.any(freqs.imag):
-        raise ValueError(f"{path}: frequency row (row {N_PANEL_POINTS + 1}) must be real")
+        raise ValueError(f"{path}: frequency row (row {len(rows)}) must be real")
     return Modes(table[:-1], freqs.real, source=str(path))

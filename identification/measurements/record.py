@@ -24,6 +24,7 @@ from identification.measurements.trc_layout import (
     BASE,
     CENTRE_POINT,
     DATA_COLUMNS,
+    N_PANEL_POINTS,
     PANEL,
     config_files,
     name_part,
@@ -90,6 +91,11 @@ class Record:
             row, col = np.argwhere(~np.isfinite(data))[0]
             raise ValueError(f"{where}: non-finite value at row {row + 1}, column {col + 1}")
         check_increasing(where, data[:, 0], strict=True)
+        if self.modes is not None and self.modes.shapes.shape[0] != N_PANEL_POINTS:
+            raise ValueError(
+                f"{where}: the modes {self.modes.source} have {self.modes.shapes.shape[0]} shape "
+                f"rows; the TRC layout's are at its {N_PANEL_POINTS} panel points"
+            )
         half_sample = 0.5 * (data[-1, 0] - data[0, 0]) / (data.shape[0] - 1)
         if not self.steps.covers(data[0, 0], data[-1, 0], half_sample):
             raise ValueError(
@@ -144,6 +150,16 @@ class Record:
     def response_velocity(self) -> np.ndarray:
         """Centre-point velocity relative to the base (m/s)."""
         return self.panel_velocity[:, CENTRE_POINT - 1] - self.excitation_velocity
+
+    @property
+    def sensor_names(self) -> tuple[str, ...]:
+        """Names of the response channels: the panel points' data columns."""
+        return DATA_COLUMNS[PANEL]
+
+    @cached_property
+    def sensor_responses(self) -> np.ndarray:
+        """(n, 15) panel-point velocities relative to the base (m/s); column 8 is the response."""
+        return self.panel_velocity - self.excitation_velocity[:, None]
 
     @property
     def response(self) -> np.ndarray:
