@@ -57,6 +57,8 @@ from identification.measurements.records import (
     write_record,
 )
 from identification.multimode import ModalModel, nonlinear_modes, phase_resonance
+from identification.multimode.balance import modal_arrays
+from identification.multimode.pll.closed_loop import _kernel_arrays, _linearisation
 from identification.multimode.solve import HarmonicSettings, ModalSolution
 from identification.rig.conditions import Controller, Drift, Sensors, Shaker
 from identification.rig.lab import measured_channels, sensor_draws
@@ -73,6 +75,7 @@ __all__ = [
     "plate_shapes",
     "read_modal_ground_truth",
     "reference_points",
+    "small_amplitude_frequencies_hz",
 ]
 
 MODAL_GROUND_TRUTH_FORMAT = "pm-joint/modal-rig-ground-truth"
@@ -84,6 +87,8 @@ _GRID = (5, 3)
 _TRUTH_POINTS = 81
 #: The truth's grid reaches this far beyond the campaign's target amplitudes (a factor).
 _TRUTH_MARGIN = 1.4
+#: A decay's truth spans its initial amplitude down to this many times less.
+_DECAY_SPAN = 300.0
 #: Harmonics of the truth's harmonic balance.
 _TRUTH_HARMONICS = 7
 
@@ -99,6 +104,13 @@ def plate_shapes(width_variation: float = 0.1) -> np.ndarray:
     eta = np.arange(1, _GRID[1] + 1) / (_GRID[1] + 1)
     torsion = np.outer(np.sin(np.pi * xi), (1 - 2 * eta) / 0.5).ravel()
     return np.column_stack([first_bending_shape(width_variation), torsion])
+
+
+def small_amplitude_frequencies_hz(model: ModalModel) -> np.ndarray:
+    """Natural frequencies of ``model`` linearised at rest (joint elements' linear parts in)."""
+    arrays = modal_arrays(model)
+    stiffness = _linearisation(arrays, _kernel_arrays(arrays, None))[0][0]
+    return np.sqrt(np.linalg.eigvalsh(stiffness)) / (2 * np.pi)
 
 
 def reference_points(shapes: np.ndarray) -> np.ndarray:
@@ -151,6 +163,7 @@ class ModeBackboneTruth(NamedTuple):
     participation_mm: np.ndarray
     participation_phase_deg: np.ndarray
     energy_share: np.ndarray
+    base_acceleration_m_s2: np.ndarray
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -204,6 +217,11 @@ def _truth_backbone(
         participation_mm=1e3 * amplitude,
         participation_phase_deg=np.degrees(np.angle(np.exp(1j * relative))),
         energy_share=solution.energy_share,
+        base_acceleration_m_s2=(
+            solution.base_acceleration[..., 1]
+            if problem == "phase_resonance"
+            else np.full(solution.frequency_hz.shape, np.nan)
+        ),
     )
 
 
@@ -447,8 +465,13 @@ class ModalRig:
         return round(0.05 * self.fs)
 
     def modes(self) -> Modes:
-        """The linear modes of the nominal model at the panel points (the modes file)."""
-        return Modes(self.shape_matrix, [m.frequency_hz for m in self.model.modes])
+        """The linear modes of the nominal model at the panel points (the modes file).
+
+        Shapes are those of the truth's modal coordinates; frequencies those of the
+        model linearised at rest (joint elements stuck), which the joint's linear parts
+        couple slightly, so its modes are the coordinates' to within that coupling.
+        """
+        return Modes(self.shape_matrix, small_amplitude_frequencies_hz(self.model))
 
     def _n_samples(self) -> int:
         if self.test == "free-decay":
@@ -550,12 +573,14 @@ class ModalRig:
 
         PLL records: the phase-resonant backbone of each mode over the locked mode's
         amplitude range (the other modes from their own small-amplitude start to the
-        same range at their reference points); decays: each mode's nonlinear mode.
+        same range at their reference points); decays: each mode's nonlinear mode from
+        the decay's initial amplitude down.
         """
-        targets = np.asarray(self.amplitudes_m or (self.decay_amplitude_m,))
-        grid = np.geomspace(
-            targets.min() / _TRUTH_MARGIN, targets.max() * _TRUTH_MARGIN, _TRUTH_POINTS
-        )
+        if self.test == "pll":
+            low, high = min(self.amplitudes_m), max(self.amplitudes_m)
+        else:  # a decay passes through every amplitude below its start
+            low, high = self.decay_amplitude_m / _DECAY_SPAN, self.decay_amplitude_m
+        grid = np.geomspace(low / _TRUTH_MARGIN, high * _TRUTH_MARGIN, _TRUTH_POINTS)
         problem = "phase_resonance" if self.test == "pll" else "nonlinear_modes"
         modes = [self.mode] if self.test == "pll" else range(1, model.n_modes + 1)
         return tuple(_truth_backbone(model, m, grid, self.shape_matrix, problem) for m in modes)
