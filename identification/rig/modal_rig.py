@@ -36,7 +36,6 @@ Ground truth
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -45,16 +44,14 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from identification.artifacts import atomic_write_text, versions
+from identification.artifacts import versions
 from identification.measurements.records import (
     N_BASE_POINTS,
     N_PANEL_POINTS,
-    Campaign,
     Modes,
     Record,
     StepSchedule,
     record_name,
-    write_record,
 )
 from identification.multimode import ModalModel, nonlinear_modes, phase_resonance
 from identification.multimode.balance import modal_arrays
@@ -63,7 +60,13 @@ from identification.multimode.solve import HarmonicSettings, ModalSolution
 from identification.rig.conditions import Controller, Drift, Sensors, Shaker
 from identification.rig.lab import measured_channels, sensor_draws
 from identification.rig.modal_engine import free_decay, run_modal_lab
-from identification.rig.rig import first_bending_shape
+from identification.rig.rig import (
+    Rig,
+    campaign_jobs,
+    first_bending_shape,
+    level_steps,
+    read_sidecar,
+)
 
 __all__ = [
     "MODAL_GROUND_TRUTH_FORMAT",
@@ -79,7 +82,6 @@ __all__ = [
 ]
 
 MODAL_GROUND_TRUTH_FORMAT = "pm-joint/modal-rig-ground-truth"
-_GROUND_TRUTH_FILE = "ground_truth.json"
 TESTS = ("pll", "free-decay")
 DECAY_STARTS = ("impulse", "release")
 _GRID = (5, 3)
@@ -452,13 +454,7 @@ class ModalRig:
                 [1.0, 1.0, 0.0, 0.0],
                 source=source,
             )
-        ramp, hold = self._samples()
-        time, level = [0.0], [0.0]
-        for j, volts in enumerate(self.levels_v):
-            start = j * (ramp + hold) + ramp
-            time += [start / self.fs, (start + hold - 1) / self.fs]
-            level += [volts, volts]
-        return StepSchedule(time, level, source=source)
+        return level_steps(self.levels_v, *self._samples(), self.fs, self.config)
 
     def _decay_head(self) -> int:
         """Samples before the release (the panel held, or at rest before the hit)."""
@@ -587,16 +583,7 @@ class ModalRig:
 
     # ------------------------------------------------------------ campaigns
     def _jobs(self, assemblies: int, runs: int, seed: int) -> list[tuple]:
-        if assemblies < 1 or runs < 1:
-            raise ValueError(f"assemblies and runs must be ≥ 1, got {assemblies}, {runs}")
-        jobs = []
-        for a in range(1, assemblies + 1):
-            drawn = self.draw(np.random.default_rng([seed, a]))
-            for r in range(1, runs + 1):
-                name = record_name(self.config, a, r if runs > 1 else None)
-                jobs.append((name, drawn, (seed, a, r)))
-        last = max(len(jobs) - 1, 1)
-        return [(*job, i / last) for i, job in enumerate(jobs)]
+        return campaign_jobs(self.draw, self.config, assemblies, runs, seed)
 
     def _simulate_job(self, name, drawn, seeds, position) -> tuple[Record, dict[str, Any]]:
         model, gain = drawn
@@ -611,38 +598,11 @@ class ModalRig:
         }
         return record, truth
 
-    def campaign(self, assemblies: int = 3, runs: int = 1, seed: int = 0):
-        """The records of :meth:`write_campaign` in memory, each with its ground-truth entry."""
-        return [self._simulate_job(*job) for job in self._jobs(assemblies, runs, seed)]
-
-    def write_campaign(
-        self,
-        folder: str | Path,
-        assemblies: int = 3,
-        runs: int = 1,
-        seed: int = 0,
-        comma: bool = False,
-        extension: str = "",
-        precision: int = 6,
-        executor: Any = None,
-        progress: bool = False,
-    ) -> Campaign:
-        """Simulate and write a campaign and its ``ground_truth.json`` (as
-        :meth:`identification.rig.rig.Rig.write_campaign`; records one after another)."""
-        folder = Path(folder)
-        records: dict[str, Any] = {}
-        sidecar = self._sidecar(records)
-        jobs = self._jobs(assemblies, runs, seed)
-        if progress:
-            from tqdm.auto import tqdm
-
-            jobs = tqdm(jobs, desc="rig records", unit="record")
-        for job in jobs:
-            record, truth = self._simulate_job(*job)
-            write_record(record, folder, comma=comma, extension=extension, precision=precision)
-            records[job[0]] = truth
-            atomic_write_text(folder / _GROUND_TRUTH_FILE, json.dumps(sidecar, indent=2))
-        return Campaign(folder)
+    # The campaign loop, its executors and its sidecar bookkeeping are the one-mode rig's.
+    campaign = Rig.campaign
+    write_campaign = Rig.write_campaign
+    _write = Rig._write
+    _open = Rig._open
 
     def _sidecar(self, records: dict[str, Any]) -> dict[str, Any]:
         return {
@@ -691,15 +651,7 @@ def _ref_scale(rig: ModalRig, mode: int) -> float:
 
 def read_modal_ground_truth(folder: str | Path) -> dict[str, ModalRecordTruth]:
     """The per-record ground truth of a :class:`ModalRig` campaign folder, by record name."""
-    path = Path(folder) / _GROUND_TRUTH_FILE
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: cannot read the rig's ground truth ({exc})") from None
-    if data.get("format") != MODAL_GROUND_TRUTH_FORMAT:
-        raise ValueError(
-            f"{path}: not a modal rig ground-truth file (format {data.get('format')!r})"
-        )
+    path, data = read_sidecar(folder, MODAL_GROUND_TRUTH_FORMAT)
     return {
         name: ModalRecordTruth(
             model=ModalModel.from_dict(entry["model"], source=f"{path}: {name}"),
