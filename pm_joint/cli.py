@@ -27,7 +27,9 @@ from identification.measurements.modal_filter import SECOND_MODE_SHARE
 from identification.measurements.quantities import EXCITATION_KINDS, QUANTITIES, TEST_TYPES
 from identification.measurements.signals import DECAY_EDGE_PERIODS
 from identification.model import PRESETS, JointModel
-from identification.rig import RIG_PRESETS
+from identification.rig import MODAL_RIG_PRESETS, RIG_PRESETS
+from identification.rig.modal_rig import TESTS as MODAL_RIG_TESTS
+from identification.rig.presets import TWO_MODE_RATIO
 from identification.sindy import PAPER_LIBRARY
 from pm_joint.sampler_defaults import (
     DEFAULT_FORWARD,
@@ -176,16 +178,48 @@ def _cmd_model(args: argparse.Namespace) -> None:
 def _cmd_rig(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import write_rig_campaign
 
+    preset = args.preset_name or args.preset
+    if preset is None:
+        raise ValueError("name a rig preset (positional or --preset)")
+    if args.preset_name and args.preset and args.preset_name != args.preset:
+        raise ValueError(f"two rig presets named: {args.preset!r} and {args.preset_name!r}")
+    if preset in MODAL_RIG_PRESETS:
+        _modal_rig(preset, args)
+        return
+    if args.ratio is not None or args.test is not None or args.mode is not None:
+        raise ValueError(
+            f"--ratio, --test and --mode belong to the modal presets "
+            f"({', '.join(MODAL_RIG_PRESETS)}), not to {preset!r}"
+        )
     with contextlib.ExitStack() as stack:
         # --workers alone keeps its process pool; --scheduler sends the records to dask.
         client = stack.enter_context(_executor(args)) if args.scheduler else None
         campaign = write_rig_campaign(
-            args.preset, args.out, assemblies=args.assemblies, runs=args.runs, seed=args.seed,
+            preset, args.out, assemblies=args.assemblies, runs=args.runs, seed=args.seed,
             n_levels=args.levels, workers=args.workers, executor=client,
             force_driven=args.force_driven, quantity=args.quantity,
         )  # fmt: skip
     layout = "column layout, force-driven" if args.force_driven else "TRC layout"
-    print(f"wrote {len(campaign)} record(s) of rig preset {args.preset!r} to {args.out} ({layout})")
+    print(f"wrote {len(campaign)} record(s) of rig preset {preset!r} to {args.out} ({layout})")
+
+
+def _modal_rig(preset: str, args: argparse.Namespace) -> None:
+    """A campaign of a rig preset of several modes (records one after another)."""
+    from identification.rig import rig_for_preset
+
+    if args.force_driven:
+        raise ValueError(f"rig preset {preset!r} has no force-driven test")
+    test = args.test or "pll"
+    options = {"ratio": args.ratio, "test": test, "mode": args.mode or 1}
+    rig = rig_for_preset(preset, levels=args.levels, **options)
+    campaign = rig.write_campaign(
+        args.out, assemblies=args.assemblies, runs=args.runs, seed=args.seed
+    )
+    what = f"PLL locking mode {rig.mode}" if test == "pll" else f"free decays ({rig.decay_start})"
+    print(
+        f"wrote {len(campaign)} record(s) of rig preset {preset!r} to {args.out} "
+        f"(TRC layout, {what}, ground truth in ground_truth.json)"
+    )
 
 
 def _cmd_backbones(args: argparse.Namespace) -> None:
@@ -392,7 +426,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_model)
 
     p = sub.add_parser("rig", help="write a virtual test campaign in the TRC layout")
-    p.add_argument("preset", choices=sorted(RIG_PRESETS), help="rig preset")
+    rig_presets = sorted([*RIG_PRESETS, *MODAL_RIG_PRESETS])
+    p.add_argument("preset", nargs="?", choices=rig_presets, help="rig preset")
+    p.add_argument(
+        "--preset",
+        dest="preset_name",
+        choices=rig_presets,
+        help="rig preset (instead of the positional name)",
+    )
     p.add_argument("--out", required=True, help="campaign folder")
     p.add_argument("--assemblies", type=int, default=5, help="assemblies (default 5)")
     p.add_argument("--runs", type=int, default=1, help="runs per assembly (default 1)")
@@ -406,6 +447,16 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("--quantity", choices=QUANTITIES, default="velocity",
                    help="response of a force-driven record (default velocity)")  # fmt: skip
+    p.add_argument(
+        "--ratio",
+        type=float,
+        help="modal presets: second mode's over first mode's frequency "
+        f"(default {TWO_MODE_RATIO} for two-mode)",
+    )
+    p.add_argument(
+        "--test", choices=MODAL_RIG_TESTS, help="modal presets: PLL holds (default) or free decays"
+    )
+    p.add_argument("--mode", type=int, help="modal presets: the mode the PLL locks (default 1)")
     p.set_defaults(func=_cmd_rig)
 
     records = "campaign folder or record file (TRC or column layout)"

@@ -88,7 +88,14 @@ from identification.rig.joints import (
 )
 from identification.rig.rig import Rig, trc_channels
 
-__all__ = ["LabAssembly", "LabRig", "LabTimeSeries", "panel_positions"]
+__all__ = [
+    "LabAssembly",
+    "LabRig",
+    "LabTimeSeries",
+    "measured_channels",
+    "panel_positions",
+    "sensor_draws",
+]
 
 #: Catalogue terms of the first mode alone; every other term acts on the joint displacement.
 _MODAL_EFFECTS = (LINEAR_STIFFNESS, VISCOUS_DAMPING)
@@ -115,6 +122,41 @@ CHANNELS = (
 # What the controller's sensors add: centre-point noise, centre-point dropout value
 # (NaN where none), base-point-1 noise, its dropout value.
 _CENTRE_NOISE, _CENTRE_DROPOUT, _BASE_NOISE, _BASE_DROPOUT = range(4)
+
+
+def sensor_draws(
+    sensors: Sensors, noise_m_s: float, rng: np.random.Generator, n_samples: int, fs: float
+) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int, np.ndarray]]]:
+    """What the 17 velocity channels of one record add: their RMS noise (m/s), the
+    ``(n_samples, 17)`` noise with the panel offset, and every dropout as
+    ``(channel, first sample, spike values)``; ``rng`` draws the noise, then the dropouts."""
+    channel_noise_m_s = sensors.channel_noise(noise_m_s)
+    noise = rng.standard_normal((n_samples, channel_noise_m_s.size)) * channel_noise_m_s
+    noise[:, :N_PANEL_POINTS] += sensors.panel_offset_m_s
+    dropouts = [
+        (channel, start, rng.uniform(-1.0, 1.0, length) * sensors.dropout_spike_m_s)
+        for channel, start, length in sensors.dropouts(rng, n_samples, fs)
+    ]
+    return channel_noise_m_s, noise, dropouts
+
+
+def measured_channels(
+    data: np.ndarray,
+    drift: Drift,
+    position: float,
+    noise: np.ndarray,
+    dropouts: Sequence[tuple[int, int, np.ndarray]],
+) -> None:
+    """Turn true TRC data columns into measured ones, in place: the drifting sensor gain,
+    the noise and the dropouts of :func:`sensor_draws` (``position`` places the record in
+    its campaign)."""
+    panel = slice(1, 1 + N_PANEL_POINTS)
+    gain = np.linspace(*drift.gain(position), data.shape[0])
+    drifting = panel if drift.gain_channels == "panel" else slice(panel.stop, -2)
+    data[:, drifting] *= gain[:, None]
+    data[:, 1:-2] += noise
+    for channel, start, spikes in dropouts:
+        data[start : start + spikes.size, 1 + channel] = spikes
 
 
 def panel_positions() -> np.ndarray:
@@ -666,13 +708,9 @@ class LabRig(Rig):
         """
         ramp, hold = self._samples()
         n = len(self.levels_v) * (ramp + hold)
-        channel_noise_m_s = self.sensors.channel_noise(self.noise_m_s)
-        noise = rng.standard_normal((n, channel_noise_m_s.size)) * channel_noise_m_s
-        noise[:, :N_PANEL_POINTS] += self.sensors.panel_offset_m_s
-        dropouts = [
-            (channel, start, rng.uniform(-1.0, 1.0, length) * self.sensors.dropout_spike_m_s)
-            for channel, start, length in self.sensors.dropouts(rng, n, self.fs)
-        ]
+        channel_noise_m_s, noise, dropouts = sensor_draws(
+            self.sensors, self.noise_m_s, rng, n, self.fs
+        )
         centre, base = CENTRE_POINT - 1, N_PANEL_POINTS
         sensed = np.full((4, n), np.nan)
         sensed[_CENTRE_NOISE], sensed[_BASE_NOISE] = noise[:, centre], noise[:, base]
@@ -698,12 +736,7 @@ class LabRig(Rig):
         if assembly.second_mode is not None:
             shape = assembly.second_mode.panel_shape(panel_positions())
             data[:, panel] += np.outer(series.w, shape)
-        gain = np.linspace(*self.drift.gain(position), n)
-        drifting = panel if self.drift.gain_channels == "panel" else slice(panel.stop, -2)
-        data[:, drifting] *= gain[:, None]
-        data[:, 1:-2] += noise
-        for channel, start, spikes in dropouts:
-            data[start : start + spikes.size, 1 + channel] = spikes
+        measured_channels(data, self.drift, position, noise, dropouts)
         record = Record(data, self.steps(), name, modes=self.modes())
         delta = self.drift.frequency(position)
         gains = self.controller.gains(assembly.linear_frequency_hz, assembly.damping_ratio)

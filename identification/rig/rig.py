@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -64,9 +64,12 @@ __all__ = [
     "GROUND_TRUTH_FILE",
     "RecordTruth",
     "Rig",
+    "campaign_jobs",
     "first_bending_shape",
+    "level_steps",
     "levels_for_amplitudes",
     "read_ground_truth",
+    "read_sidecar",
     "trc_channels",
 ]
 
@@ -149,6 +152,39 @@ def levels_for_amplitudes(model: JointModel, amplitudes_m: ArrayLike) -> np.ndar
             f"at some of the amplitudes {np.asarray(amplitudes_m)} m (negative net damping?)"
         )
     return excitation_m_s2
+
+
+def level_steps(
+    levels_v: Sequence[float], ramp: int, hold: int, fs: float, config: str
+) -> StepSchedule:
+    """A fixed-time level schedule (V): rest, then per level a ramp of ``ramp`` samples and a
+    hold of ``hold`` samples at ``fs``; the step file of configuration ``config``."""
+    time, level = [0.0], [0.0]
+    for j, volts in enumerate(levels_v):
+        start = j * (ramp + hold) + ramp
+        time += [start / fs, (start + hold - 1) / fs]
+        level += [volts, volts]
+    return StepSchedule(time, level, source=f"Config{config}_PRT_amplitude_steps")
+
+
+def campaign_jobs(
+    draw: Callable[[np.random.Generator], Any], config: str, assemblies: int, runs: int, seed: int
+) -> list[tuple]:
+    """``(name, assembly draw, seeds, campaign position)`` of every record, in test order.
+
+    Assembly ``a`` draws from ``default_rng([seed, a])``; run ``r`` of it gets the seeds
+    ``(seed, a, r)``; the position runs from 0 (first record) to 1 (last).
+    """
+    if assemblies < 1 or runs < 1:
+        raise ValueError(f"assemblies and runs must be ≥ 1, got {assemblies}, {runs}")
+    jobs = []
+    for a in range(1, assemblies + 1):
+        drawn = draw(np.random.default_rng([seed, a]))
+        for r in range(1, runs + 1):
+            name = record_name(config, a, r if runs > 1 else None)
+            jobs.append((name, drawn, (seed, a, r)))
+    last = max(len(jobs) - 1, 1)
+    return [(*job, i / last) for i, job in enumerate(jobs)]
 
 
 @dataclass(frozen=True)
@@ -333,13 +369,7 @@ class Rig:
     # ------------------------------------------------------------ running
     def steps(self) -> StepSchedule:
         """The fixed-time level schedule (V): rest, then per level a ramp and a hold."""
-        ramp, hold = self._samples()
-        time, level = [0.0], [0.0]
-        for j, volts in enumerate(self.levels_v):
-            start = j * (ramp + hold) + ramp
-            time += [start / self.fs, (start + hold - 1) / self.fs]
-            level += [volts, volts]
-        return StepSchedule(time, level, source=f"Config{self.config}_PRT_amplitude_steps")
+        return level_steps(self.levels_v, *self._samples(), self.fs, self.config)
 
     def modes(self) -> Modes:
         """The configuration's linear first bending mode (nominal model)."""
@@ -402,16 +432,7 @@ class Rig:
 
     def _jobs(self, assemblies: int, runs: int, seed: int) -> list[tuple]:
         """``(name, assembly draw, seeds, campaign position)`` of every record, in test order."""
-        if assemblies < 1 or runs < 1:
-            raise ValueError(f"assemblies and runs must be ≥ 1, got {assemblies}, {runs}")
-        jobs = []
-        for a in range(1, assemblies + 1):
-            drawn = self._draw_job(np.random.default_rng([seed, a]))
-            for r in range(1, runs + 1):
-                name = record_name(self.config, a, r if runs > 1 else None)
-                jobs.append((name, drawn, (seed, a, r)))
-        last = max(len(jobs) - 1, 1)
-        return [(*job, i / last) for i, job in enumerate(jobs)]
+        return campaign_jobs(self._draw_job, self.config, assemblies, runs, seed)
 
     def _simulate_job(
         self, name: str, drawn: Any, seeds: Sequence[int], position: float
@@ -536,15 +557,21 @@ def _outcome(future) -> Any:
         return exc
 
 
-def read_ground_truth(folder: str | Path) -> dict[str, RecordTruth]:
-    """The per-record ground truth of a rig campaign folder, by record name."""
+def read_sidecar(folder: str | Path, format_name: str) -> tuple[Path, dict[str, Any]]:
+    """The path and content of a campaign folder's ``ground_truth.json`` of ``format_name``."""
     path = Path(folder) / GROUND_TRUTH_FILE
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path}: cannot read the rig's ground truth ({exc})") from None
-    if data.get("format") != _FORMAT:
+    if data.get("format") != format_name:
         raise ValueError(f"{path}: not a rig ground-truth file (format {data.get('format')!r})")
+    return path, data
+
+
+def read_ground_truth(folder: str | Path) -> dict[str, RecordTruth]:
+    """The per-record ground truth of a rig campaign folder, by record name."""
+    path, data = read_sidecar(folder, _FORMAT)
     return {
         name: RecordTruth(
             model=JointModel.from_dict(entry["model"], source=f"{path}: {name}"),

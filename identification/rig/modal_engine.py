@@ -1,0 +1,298 @@
+"""The two-mode lab rig's test engine: the lab's PLL around the N-mode PLL simulator's integrator.
+
+The structure is a :class:`~identification.multimode.model.ModalModel`, advanced by
+the N-mode PLL simulator's modal equations and RK4 step
+(:func:`identification.multimode.pll.kernel._accelerations` and ``_advance``: joint
+elements on joint coordinates built from the modes, polynomial modal couplings,
+Jenkins anchors moved after each sub-step). Around it runs the lab rig's loop
+(:mod:`identification.rig.lab`, whose conventions hold unchanged): the base
+acceleration ``a_base = a_coil − ω_c v_base`` with the distorted coil acceleration
+``A(t)(sin θ + Σ d_k sin(kθ + ψ_k))``, a multiply-and-low-pass phase detector on
+what the sensors deliver (noise and gain drift included) behind a PI controller,
+the natural-frequency drift (every mode's stiffness times ``(1 + δ(t))²``), the
+phase offset of an uncompensated sensing chain.
+
+The controller's response channel is a weighted sum of panel channels minus the
+same weight of the base channel: the centre point for the bending mode (as on the
+one-mode rig), the difference of two side points for a torsion mode (the bending
+mode and the base cancel there, as a lab's modal lock would make them).
+
+The shaker-structure interaction of the one-mode lab rig (the structure's restoring
+force pushing the armature back) is not modelled here: with several modes it is a
+sum over modes weighted by their participation, left out rather than guessed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from identification.analytical.pll.closed_loop import _N_SUB
+from identification.analytical.pll.config import PLLConfig
+from identification.multimode.balance import modal_arrays
+from identification.multimode.model import ModalModel
+from identification.multimode.pll.closed_loop import _control, _kernel_arrays
+from identification.multimode.pll.kernel import _ACC, _N_WORK, _V, _X, _accelerations, _advance
+from identification.rig.conditions import Controller, Drift, Shaker
+from identification.rig.lab import _coil, _demodulate, _ramp, _wrap
+
+__all__ = ["ModalLabSeries", "free_decay", "run_modal_lab"]
+
+# Settings vector of the kernel.
+(
+    _DT, _N_SUBSTEPS, _RAMP, _HOLD, _KP, _KI, _STAGE_ALPHA, _ORDER, _BASE_REFERENCE, _TARGET,
+    _OMEGA_INITIAL, _OMEGA_LOW, _OMEGA_HIGH, _DELTA0, _DELTA1, _GAIN0, _GAIN1, _GAIN_ON_PANEL,
+    _X_MAX, _CENTRING, _WEIGHT_SUM, _N_SETTINGS,
+) = range(22)  # fmt: skip
+#: Channels recorded besides the modal coordinates and velocities (then η, η̇ of every mode).
+CHANNELS = ("base_velocity", "base_acceleration", "frequency_hz", "theta", "level",
+            "phase_error_deg")  # fmt: skip
+#: Largest modal displacement before a run counts as diverged (m).
+_X_LIMIT = 0.05
+
+
+@dataclass(frozen=True, eq=False)
+class ModalLabSeries:
+    """The engine's true signals of one record (SI, ``fs`` samples per second).
+
+    ``eta``, ``eta_dot`` are ``(N, n)`` modal coordinates and velocities; the other
+    channels as :class:`identification.rig.lab.LabTimeSeries`. ``completed`` is
+    False when the run diverged (NaN from there).
+    """
+
+    fs: float
+    completed: bool
+    eta: np.ndarray
+    eta_dot: np.ndarray
+    base_velocity: np.ndarray
+    base_acceleration: np.ndarray
+    frequency_hz: np.ndarray
+    theta: np.ndarray
+    level: np.ndarray
+    phase_error_deg: np.ndarray
+
+    @property
+    def t(self) -> np.ndarray:
+        return np.arange(self.eta.shape[1]) / self.fs
+
+
+@numba.njit(cache=True)
+def _modal_lab_kernel(modal0, shapes, el_int, el_float, cp_int, cp_coef, weights, distortion,
+                      coil_m_s2, settings, sensed, out):  # fmt: skip
+    """Run the whole schedule; fills ``out`` and returns the samples done.
+
+    ``weights`` (N,) are the modal velocities' weights in the controller's response
+    channel, ``sensed`` (2, n) the noise that channel and the base channel carry.
+    """
+    dt = settings[_DT]
+    n_sub = int(settings[_N_SUBSTEPS])
+    ramp = int(settings[_RAMP])
+    per_hold = ramp + int(settings[_HOLD])
+    kp, ki, alpha = settings[_KP], settings[_KI], settings[_STAGE_ALPHA]
+    base_reference = settings[_BASE_REFERENCE] > 0.0
+    target = settings[_TARGET]
+    omega_low, omega_high = settings[_OMEGA_LOW], settings[_OMEGA_HIGH]
+    delta0, delta1 = settings[_DELTA0], settings[_DELTA1]
+    gain0, gain1 = settings[_GAIN0], settings[_GAIN1]
+    gain_on_panel = settings[_GAIN_ON_PANEL] > 0.0
+    x_max, centring, weight_sum = settings[_X_MAX], settings[_CENTRING], settings[_WEIGHT_SUM]
+    n = modal0.shape[0]
+    n_channels = len(CHANNELS)
+    modal = modal0.copy()
+    work = np.zeros((_N_WORK, n))
+    xa = np.zeros(el_int.shape[0])
+    fa = np.zeros(el_int.shape[0])
+    forcing = np.empty(3)
+    filters = np.zeros((4, int(settings[_ORDER])))
+    vb = 0.0
+    theta = 0.0
+    omega = settings[_OMEGA_INITIAL]
+    integral = omega
+    control_on = False
+    a_from = 0.0
+    h = dt / n_sub
+    n_total = out.shape[1]
+    for k in range(n_total):
+        hold = k // per_hold
+        in_hold = k - hold * per_hold
+        if in_hold == 0 and hold > 0:
+            a_from = coil_m_s2[hold - 1]
+        a_to = coil_m_s2[hold]
+        fraction = k / max(n_total - 1, 1)
+        stiffening = (1.0 + delta0 + (delta1 - delta0) * fraction) ** 2
+        for m in range(n):
+            modal[m, 0] = modal0[m, 0] * stiffening
+        gain = gain0 + (gain1 - gain0) * fraction
+        amplitude = _ramp(a_from, a_to, in_hold, ramp)
+        a_base = _coil(amplitude, theta, distortion) - centring * vb
+        _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V, xa, fa,
+                       a_base, _ACC)  # fmt: skip
+        relative = 0.0
+        for m in range(n):
+            if not (abs(work[_X, m]) <= x_max and np.isfinite(work[_ACC, m])):
+                return k
+            relative += weights[m] * work[_V, m]
+
+        # What the sensors deliver to the controller.
+        panel_gain = gain if gain_on_panel else 1.0
+        base_gain = 1.0 if gain_on_panel else gain
+        base = base_gain * vb + sensed[1, k]
+        response = panel_gain * (relative + weight_sum * vb) + sensed[0, k] - weight_sum * base
+        s, c = np.sin(theta), np.cos(theta)
+        phase = np.arctan2(_demodulate(filters, 1, response * c, alpha),
+                           _demodulate(filters, 0, response * s, alpha))  # fmt: skip
+        if base_reference:
+            phase -= np.arctan2(_demodulate(filters, 3, base * c, alpha),
+                                _demodulate(filters, 2, base * s, alpha))  # fmt: skip
+        error = _wrap(phase - target)
+        if in_hold == ramp and hold == 0:
+            control_on = True
+        if control_on:
+            integral = min(max(integral + ki * error * dt, omega_low), omega_high)
+            omega = min(max(integral + kp * error, omega_low), omega_high)
+
+        out[0, k] = vb
+        out[1, k] = a_base
+        out[2, k] = omega / (2.0 * np.pi)
+        out[3, k] = theta
+        out[4, k] = amplitude
+        out[5, k] = np.degrees(error)
+        for m in range(n):
+            out[n_channels + m, k] = work[_X, m]
+            out[n_channels + n + m, k] = work[_V, m]
+
+        # One RK4 sub-step at a time: the base velocity (centred) is a state of its own,
+        # so the modal equations' excitation at each stage is its stage derivative.
+        for j in range(n_sub):
+            coils = np.empty(3)
+            for i in range(3):
+                part = (j + 0.5 * i) / n_sub
+                coils[i] = _coil(_ramp(a_from, a_to, in_hold + part, ramp),
+                                 theta + omega * dt * part, distortion)  # fmt: skip
+            k1 = coils[0] - centring * vb
+            k2 = coils[1] - centring * (vb + 0.5 * h * k1)
+            k3 = coils[1] - centring * (vb + 0.5 * h * k2)
+            k4 = coils[2] - centring * (vb + h * k3)
+            if j > 0:
+                _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V,
+                               xa, fa, k1, _ACC)  # fmt: skip
+            forcing[0], forcing[1], forcing[2] = k1, 0.5 * (k2 + k3), k4
+            _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing)
+            vb += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        theta += omega * dt
+    return n_total
+
+
+def _structure(model: ModalModel, fs: float):
+    """The kernel's arrays of one model and its RK4 sub-steps per sample."""
+    arrays = modal_arrays(model)
+    k = _kernel_arrays(arrays, None)
+    control = _control(arrays, k, PLLConfig(fs=fs), 0, model.name or "modal rig")
+    return k, int(control[0, _N_SUB])
+
+
+def run_modal_lab(
+    model: ModalModel,
+    coil_m_s2: np.ndarray,
+    *,
+    fs: float,
+    ramp_samples: int,
+    hold_samples: int,
+    response_weights: np.ndarray,
+    weight_sum: float,
+    target_frequency_hz: float,
+    target_damping_ratio: float,
+    shaker: Shaker,
+    controller: Controller,
+    drift: Drift,
+    position: float,
+    sensed: np.ndarray,
+) -> ModalLabSeries:
+    """Simulate a stepped-level PLL test of ``model`` in the lab (see the module notes).
+
+    ``coil_m_s2`` are the coil-acceleration amplitudes of the holds,
+    ``response_weights`` the modal weights of the controller's response channel
+    (panel sensors' weights times their shapes) and ``weight_sum`` the sum of the
+    panel sensors' weights (the base they carry), ``sensed`` the ``(2, n)`` noise of
+    that channel and of the base channel; ``position`` (0…1) places the record in
+    its campaign for the drift. The loop's gains are designed at the locked mode's
+    ``target_frequency_hz`` and ``target_damping_ratio``.
+    """
+    k, n_sub = _structure(model, fs)
+    n = len(coil_m_s2) * (ramp_samples + hold_samples)
+    gains = controller.gains(target_frequency_hz, target_damping_ratio)
+    omega_initial = 2 * math.pi * (controller.initial_frequency_hz or target_frequency_hz)
+    settings = np.zeros(_N_SETTINGS)
+    settings[_DT], settings[_N_SUBSTEPS] = 1.0 / fs, n_sub
+    settings[_RAMP], settings[_HOLD] = ramp_samples, hold_samples
+    settings[_KP], settings[_KI] = gains.kp, gains.ki
+    settings[_STAGE_ALPHA] = -math.expm1(-gains.stage_bandwidth / fs)
+    settings[_ORDER] = controller.detector_order
+    settings[_BASE_REFERENCE] = 1.0 if controller.reference == "base" else 0.0
+    # As on the one-mode lab rig: at phase resonance a mode's relative velocity lags
+    # the base velocity by 90° and is opposite to the coil's sin θ.
+    target = -0.5 * math.pi if controller.reference == "base" else math.pi
+    settings[_TARGET] = target + math.radians(controller.phase_offset_deg)
+    settings[_OMEGA_INITIAL] = omega_initial
+    settings[_OMEGA_LOW] = controller.frequency_limits[0] * omega_initial
+    settings[_OMEGA_HIGH] = controller.frequency_limits[1] * omega_initial
+    settings[_DELTA0], settings[_DELTA1] = drift.frequency(position)
+    settings[_GAIN0], settings[_GAIN1] = drift.gain(position)
+    settings[_GAIN_ON_PANEL] = 1.0 if drift.gain_channels == "panel" else 0.0
+    settings[_X_MAX] = _X_LIMIT
+    settings[_CENTRING] = 2 * math.pi * shaker.centring_hz
+    settings[_WEIGHT_SUM] = weight_sum
+    n_modes = model.n_modes
+    out = np.full((len(CHANNELS) + 2 * n_modes, n), np.nan)
+    done = _modal_lab_kernel(
+        k.modal[0], k.shapes[0], k.el_int, k.el_float[0], k.cp_int, k.cp_coef[0],
+        np.ascontiguousarray(response_weights, dtype=float), shaker.harmonics_table(),
+        np.asarray(coil_m_s2, dtype=float), settings, np.ascontiguousarray(sensed, dtype=float),
+        out,
+    )  # fmt: skip
+    head = len(CHANNELS)
+    return ModalLabSeries(
+        fs, done == n, out[head : head + n_modes], out[head + n_modes :],
+        **dict(zip(CHANNELS, out[:head], strict=True)),
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _decay_kernel(modal, shapes, el_int, el_float, cp_int, cp_coef, n_sub, dt, out):
+    """Free motion from the state in ``out[:, 0]`` (η then η̇); fills the rest of ``out``."""
+    n = modal.shape[0]
+    work = np.zeros((_N_WORK, n))
+    xa = np.zeros(el_int.shape[0])
+    fa = np.zeros(el_int.shape[0])
+    forcing = np.zeros(3)
+    for m in range(n):
+        work[_X, m] = out[m, 0]
+        work[_V, m] = out[n + m, 0]
+    h = dt / n_sub
+    for k in range(1, out.shape[1]):
+        for _ in range(n_sub):
+            _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V, xa, fa,
+                           0.0, _ACC)  # fmt: skip
+            _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing)
+        for m in range(n):
+            out[m, k] = work[_X, m]
+            out[n + m, k] = work[_V, m]
+
+
+def free_decay(
+    model: ModalModel, eta0_m: np.ndarray, eta_dot0_m_s: np.ndarray, fs: float, n_samples: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Free motion of ``model`` from modal displacements and velocities ``(η, η̇)``, each (N, n).
+
+    The N-mode PLL simulator's integrator with no excitation; hysteretic elements
+    start unstressed at the initial state.
+    """
+    k, n_sub = _structure(model, fs)
+    out = np.zeros((2 * model.n_modes, n_samples))
+    out[:, 0] = np.concatenate([eta0_m, eta_dot0_m_s])
+    _decay_kernel(k.modal[0], k.shapes[0], k.el_int, k.el_float[0], k.cp_int, k.cp_coef[0],
+                  n_sub, 1.0 / fs, out)  # fmt: skip
+    return out[: model.n_modes], out[model.n_modes :]
