@@ -558,7 +558,7 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("record", help="one record file (TRC or column layout)")
     p.add_argument("--model", required=True,
-                   help="model: a JointModel JSON file or preset, or a ModalModel JSON file")  # fmt: skip
+                   help="a JointModel JSON file or preset, or a ModalModel JSON file")  # fmt: skip
     p.add_argument("--out", required=True, help="CSV file of the prediction (FILE.json beside)")
     p.add_argument(
         "--mode-shapes", metavar="FILE",

@@ -56,8 +56,8 @@ from identification.multimode.model import ModalModel
 from pm_joint.predict_equations import ModelEquations, model_equations
 
 __all__ = [
-    "Prediction",
     "PredictSettings",
+    "Prediction",
     "SensorError",
     "SimulationDiverged",
     "load_model",
@@ -473,8 +473,8 @@ def predict_record(
     t = signals.time_s
     rate = (t.size - 1) / (t[-1] - t[0])
     period = 1.0 / eq.frequencies_hz.min()
-    n_fit = int(round(settings.fit_periods * period * rate)) + 1
-    n_embed = max(1, int(round(settings.embedding_periods * period * rate)))
+    n_fit = round(settings.fit_periods * period * rate) + 1
+    n_embed = max(1, round(settings.embedding_periods * period * rate))
     where = record.path or record.name
     if t.size < max(n_fit, n_embed) + 1:
         raise ValueError(
