@@ -42,8 +42,9 @@ def linear_decay(tmp_path_factory):
     """A linear oscillator's ring-down, 0.5 s at 5 kHz, from 1 mm at rest."""
     d = free_decay(lambda x, v: OMEGA**2 * x + 2 * ZETA * OMEGA * v, 1e-3, 0.0,
                    fs_hz=FS_HZ, duration_s=0.5)  # fmt: skip
-    path = tmp_path_factory.mktemp("decay") / "decay.csv"
-    return _write(path, d["time_s"], d["displacement_m"], ["displacement"])
+    folder = tmp_path_factory.mktemp("decay")
+    _write(folder / "acceleration.csv", d["time_s"], d["acceleration_m_s2"], ["acceleration"])
+    return _write(folder / "decay.csv", d["time_s"], d["displacement_m"], ["displacement"])
 
 
 def _oscillator(frequency_hz: float, zeta_omega: float) -> JointModel:
@@ -65,6 +66,14 @@ def test_the_true_linear_model_predicts_the_decay(linear_decay):
     assert prediction.nmte < 1e-3
     assert prediction.embedding_samples == round(2 * FS_HZ / F_HZ)
     assert prediction.initial_displacement[0] == pytest.approx(1e-3, rel=1e-4)
+
+
+def test_an_acceleration_record_is_predicted_in_acceleration(linear_decay):
+    path = linear_decay.with_name("acceleration.csv")
+    layout = ColumnLayout(test="free-decay", quantity="acceleration")
+    prediction = predict_record(_oscillator(F_HZ, ZETA * OMEGA), path, layout=layout)
+    assert prediction.quantity == "acceleration" and prediction.nmte < 1e-3
+    assert prediction.initial_displacement[0] == pytest.approx(1e-3, rel=1e-3)
 
 
 def test_a_one_percent_frequency_error_gives_the_phase_drift_error(linear_decay):
@@ -123,6 +132,19 @@ def test_two_modes_predict_a_two_mode_decay_and_one_mode_does_not(tmp_path, seed
     assert two.nmte <= 0.5 * one.nmte
     assert two.sensor_names == NAMES and two.embedding_samples == 1
     np.testing.assert_allclose(two.sensor_shapes, SHAPES, atol=1e-9)
+
+
+def test_two_modes_on_one_velocity_sensor(tmp_path):
+    """One sensor that sees both modes' coordinates whole: the delay-embedded error."""
+    system = ModalSystem((F_HZ, F2_HZ), (ZETA, ZETA2), couplings=(PotentialTerm(KAPPA, (2, 1)),))
+    decay = modal_free_decay(system, [8e-4, 2e-4], [0.0, 0.5], sensor_shapes=[[1.0, 1.0]],
+                             fs_hz=FS_HZ, duration_s=0.4, time_digits=7)  # fmt: skip
+    path = decay.write_csv(tmp_path / "one_sensor.csv", "velocity", ["v"])
+    layout = ColumnLayout(test="free-decay", quantity="velocity", response="v")
+    two = predict_record(_two_mode_model(), path, layout=layout)
+    one = predict_record(_oscillator(F_HZ, ZETA * OMEGA), path, layout=layout)
+    assert two.embedding_samples == round(2 * FS_HZ / F_HZ)
+    assert two.nmte < 5e-3 and two.nmte <= 0.5 * one.nmte
 
 
 # ---------------------------------------------------------------------------
