@@ -122,11 +122,8 @@ class ModelEquations:
             )
         return acc
 
-    def rhs(
-        self, base: Callable[[float], float] | None
-    ) -> Callable[[float, np.ndarray], np.ndarray]:
-        """``dstate/dt`` for :func:`scipy.integrate.solve_ivp` with ``base(t)`` the base
-        acceleration (None: no excitation)."""
+    def derivative(self) -> Callable[[np.ndarray, float], np.ndarray]:
+        """``dstate/dt`` as a function of the state and the base acceleration (m/s²)."""
         n = self.n_modes
         # Scalar kernels in the integrator's loop: the vectorised features cost ~10× per call.
         kernels = [(e.joint, e.coefficient, *e.kernel) for e in self.elements]
@@ -135,8 +132,7 @@ class ModelEquations:
         couplings = [(mode, [(k, p) for k, p in enumerate(powers) if p], c)
                      for mode, powers, c in self.couplings]  # fmt: skip
 
-        def rhs(t: float, state: np.ndarray) -> np.ndarray:
-            a = 0.0 if base is None else float(base(t))
+        def derivative(state: np.ndarray, a: float) -> np.ndarray:
             eta, eta_dot = state[:n], state[n : 2 * n]
             acc = -stiffness * eta - damping * eta_dot - participation * a
             q, q_dot = shapes @ eta, shapes @ eta_dot
@@ -158,7 +154,7 @@ class ModelEquations:
             out[n : 2 * n] = acc
             return out
 
-        return rhs
+        return derivative
 
 
 def model_equations(model: JointModel | ModalModel) -> ModelEquations:

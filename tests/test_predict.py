@@ -8,6 +8,7 @@ here in closed form; a two-mode decay is predicted by the two-mode model and not
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -18,7 +19,13 @@ from identification.measurements.columns import ColumnLayout
 from identification.measurements.modes import Modes
 from identification.model import JointModel
 from identification.multimode.model import Coupling, ModalModel, Mode
-from independent.decays import ModalSystem, PotentialTerm, free_decay, modal_free_decay
+from independent.decays import (
+    ModalSystem,
+    PotentialTerm,
+    forced_steady_state,
+    free_decay,
+    modal_free_decay,
+)
 from pm_joint.cli import main
 from pm_joint.predict import SimulationDiverged, nmte, predict_record
 
@@ -74,6 +81,33 @@ def test_an_acceleration_record_is_predicted_in_acceleration(linear_decay):
     prediction = predict_record(_oscillator(F_HZ, ZETA * OMEGA), path, layout=layout)
     assert prediction.quantity == "acceleration" and prediction.nmte < 1e-3
     assert prediction.initial_displacement[0] == pytest.approx(1e-3, rel=1e-3)
+
+
+def test_a_base_driven_record_replays_its_excitation(tmp_path):
+    """A steady response to a measured base acceleration, recorded absolute: the model driven
+    by the replayed column, the base's acceleration added back, matches it."""
+    omega_drive, amplitude = 0.97 * OMEGA, 2.0
+
+    def force(x, v):
+        return OMEGA**2 * x + 2 * ZETA * OMEGA * v
+
+    d = forced_steady_state(force, lambda t: amplitude * np.sin(omega_drive * t),
+                            2 * np.pi / omega_drive, fs_hz=FS_HZ, record_periods=30)  # fmt: skip
+    base = -d["excitation"]  # ẍ + force = −a_base
+    relative = d["excitation"] - force(d["displacement_m"], d["velocity_m_s"])
+    path = tmp_path / "driven.csv"
+    np.savetxt(path, np.column_stack([d["time_s"], relative + base, base]), delimiter=",",
+               header="time,acceleration,base_acceleration", comments="", fmt="%.12e")  # fmt: skip
+    layout = ColumnLayout(
+        test="stepped-sine", response="acceleration", quantity="acceleration",
+        excitation="base_acceleration", excitation_kind="base-acceleration",
+    )  # fmt: skip
+    prediction = predict_record(_oscillator(F_HZ, ZETA * OMEGA), path, layout=layout)
+    assert prediction.excitation == "base-acceleration" and not prediction.relative
+    assert prediction.nmte < 1e-3
+    at_rest = predict_record(_oscillator(F_HZ, ZETA * OMEGA), path,
+                             layout=dataclasses.replace(layout, test="free-decay"))  # fmt: skip
+    assert at_rest.nmte > 0.1  # the same model without the excitation: the record is not a decay
 
 
 def test_a_one_percent_frequency_error_gives_the_phase_drift_error(linear_decay):
