@@ -393,6 +393,16 @@ def _cmd_report(args: argparse.Namespace) -> None:
     print(f"wrote {index}")
 
 
+def _cmd_predict(args: argparse.Namespace) -> None:
+    from pm_joint.predict import predict_record, write_prediction
+
+    layout = _workspace_options(args)["layout"]
+    prediction = predict_record(args.model, args.record, layout=layout,
+                                mode_shapes=args.mode_shapes)  # fmt: skip
+    write_prediction(prediction, args.out)
+    print(prediction.headline())
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from pm_joint.demo import run_demo
 
@@ -589,6 +599,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--criticism", help="folder written by `pm-joint criticize`")
     p.add_argument("--out", required=True, help="report folder (index.html)")
     p.set_defaults(func=_cmd_report)
+
+    p = sub.add_parser(
+        "predict", help="simulate a model from a record's start and its prediction error",
+        description="Simulates MODEL from the start of RECORD (initial modal state fitted on its "
+        "first two periods, its base excitation replayed), writes the sensors' prediction to "
+        "FILE (time, then one column per sensor) and FILE.json (NMTE, per sensor), and prints "
+        "NMTE x.xx %%. Exit code 2 with one line when the simulation diverges.",
+    )  # fmt: skip
+    p.add_argument("record", help="one record file (TRC or column layout)")
+    p.add_argument("--model", required=True,
+                   help="a JointModel JSON file or preset, or a ModalModel JSON file")  # fmt: skip
+    p.add_argument("--out", required=True, help="CSV file of the prediction (FILE.json beside)")
+    p.add_argument(
+        "--mode-shapes", metavar="FILE",
+        help="mode shapes at the sensors, as for backbones (default: the TRC modes file, else "
+        "estimated from the record)",
+    )  # fmt: skip
+    add_record_options(p)
+    p.set_defaults(func=_cmd_predict)
 
     p = sub.add_parser("demo", help="run the pipeline on the embedded default")
     p.add_argument("--out", default="demo_out", help="output folder (default: demo_out)")
