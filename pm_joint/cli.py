@@ -4,10 +4,12 @@ Each subcommand is a thin wrapper over one function of :mod:`pm_joint.pipeline`;
 bad input ends in a one-line reason on stderr and exit code 2, and every
 warning is one line naming what it is about.
 
-``backbones``, ``identify``, ``criticize`` and ``update`` read records alike: a
-folder or a file in the TRC layout, or in a column layout (CSV/TSV with a
-header, MAT, HDF5), with the test type and, for column files, the columns'
-roles given by the record options (:func:`add_record_options`), e.g.
+``backbones``, ``identify``, ``train-surrogate``, ``criticize``, ``update`` and
+``report`` read records alike: a folder or a file in the TRC layout, or in a
+column layout (CSV/TSV with a header, MAT, HDF5; a folder of them is a campaign,
+one record per file, each file one assembly), with the test type and, for
+column files, the columns' roles given by the record options
+(:func:`add_record_options`), e.g.
 ``pm-joint backbones ring.csv --test free-decay --response displacement
 --quantity displacement``.
 """
@@ -306,10 +308,11 @@ def _cmd_train_surrogate(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import label_records, train_surrogate_stage
     from pm_joint.workspace import Workspace
 
-    workspace = Workspace(args.dir, model=args.model)
+    workspace = Workspace(args.dir, model=args.model, **_workspace_options(args))
+    labels = label_records(workspace, **_identify_options(args))
     with _executor(args) as executor:
         runtime = train_surrogate_stage(
-            workspace, args.out, labels=label_records(workspace), n_curves=args.curves,
+            workspace, args.out, labels=labels, n_curves=args.curves,
             n_amplitudes=args.amplitudes, max_epochs=args.epochs,
             hold_out_measured=not args.measured_in_training, misfit_policy=args.label_misfit,
             seed=args.seed, executor=executor,
@@ -388,7 +391,7 @@ def _cmd_report(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import run_report
     from pm_joint.workspace import Workspace
 
-    workspace = Workspace(args.dir, posterior=args.posterior)
+    workspace = Workspace(args.dir, posterior=args.posterior, **_workspace_options(args))
     index = run_report(workspace, args.out, criticism=args.criticism)
     print(f"wrote {index}")
 
@@ -507,7 +510,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_identify)
 
     p = sub.add_parser("train-surrogate", help="dataset, training and ONNX export of a surrogate")
-    p.add_argument("dir", help="campaign folder (TRC layout): the measured curves")
+    p.add_argument("dir", help=f"{records}: the measured curves")
     p.add_argument("--model", required=True, help="model JSON file")
     p.add_argument("--out", required=True, help="surrogate folder")
     p.add_argument("--curves", type=int, default=500, help="training curves (default 500)")
@@ -532,6 +535,7 @@ def build_parser() -> argparse.ArgumentParser:
         p, "dask LocalCluster workers computing the dataset (default: serial; the dataset "
         "does not depend on it)",
     )  # fmt: skip
+    add_record_options(p)
     p.set_defaults(func=_cmd_train_surrogate)
 
     p = sub.add_parser(
@@ -594,10 +598,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_update)
 
     p = sub.add_parser("report", help="HTML report of a run")
-    p.add_argument("dir", help="campaign folder (TRC layout) or a backbones CSV")
+    p.add_argument("dir", help=f"{records}, or a backbones CSV")
     p.add_argument("--posterior", help="posterior netCDF file of `pm-joint update`")
     p.add_argument("--criticism", help="folder written by `pm-joint criticize`")
     p.add_argument("--out", required=True, help="report folder (index.html)")
+    add_record_options(p)
     p.set_defaults(func=_cmd_report)
 
     p = sub.add_parser(

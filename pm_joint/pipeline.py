@@ -366,14 +366,18 @@ def criticize_campaign(
     return crit
 
 
-def label_records(workspace: Workspace, names: Sequence[str] | None = None) -> np.ndarray:
+def label_records(
+    workspace: Workspace, names: Sequence[str] | None = None, **options: Any
+) -> np.ndarray:
     """Parameters of each record alone (:func:`~surrogates.dataset.record_labels`).
 
     ``names`` default: :func:`identification.fitting.least_squares.default_free` of the
-    workspace's model; rows in the order of the records.
+    workspace's model; rows in the order of the records. ``options`` are the
+    identification's preprocessing (``edge_periods``, ``band_hz``), as
+    :func:`identify_campaign` takes them.
     """
     model = workspace.model
-    return record_labels(workspace.records, model, names or default_free(model))
+    return record_labels(workspace.records, model, names or default_free(model), **options)
 
 
 def surrogate_box(

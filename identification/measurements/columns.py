@@ -51,6 +51,7 @@ from identification.measurements.quantities import (
 from identification.measurements.series import frozen_array, regular_time
 from identification.measurements.signals import central_difference, trapezoid_integral
 from identification.measurements.steps import StepSchedule
+from identification.measurements.trc_layout import config_files
 
 __all__ = [
     "COLUMN_EXTENSIONS",
@@ -478,10 +479,22 @@ def _rounded_stamps(record: ColumnRecord) -> str:
     )
 
 
+def _table(path: Path, decimal_comma: bool | None) -> dict[str, np.ndarray]:
+    """:func:`read_table`, with a file its format's library cannot open (a truncated MAT
+    file, an HDF5 file without its signature) refused as bad input naming the file."""
+    from scipy.io.matlab import MatReadError
+
+    try:
+        return read_table(path, decimal_comma)
+    except (OSError, MatReadError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ValueError(f"{path}: not readable as a {path.suffix} file ({reason})") from None
+
+
 def _read_columns(path: str | Path, layout: ColumnLayout | None) -> ColumnRecord:
     path = Path(path)
     layout = layout or ColumnLayout()
-    columns = read_table(path, layout.decimal_comma)
+    columns = _table(path, layout.decimal_comma)
     vectors = {k: v for k, v in columns.items() if np.ndim(v) == 1}
     taken: set[str] = set()
 
@@ -699,10 +712,38 @@ def open_records(
     A folder with TRC data files, or one TRC data file, is a TRC
     :class:`~identification.measurements.records.Campaign` (of the layout's test
     type); any other folder or file is a :class:`ColumnCampaign` read with
-    ``layout``.
+    ``layout``: one record per file, each file one assembly, labelled by its
+    file name without the extension.
+
+    Raises
+    ------
+    ValueError
+        A folder that holds both TRC data files and column-layout files (which
+        are the campaign is not for the reader to guess), and every error of the
+        two campaigns (no record file, two files of one record).
     """
     source = Path(source)
     layout = layout or ColumnLayout()
     if is_trc_source(source):
+        if source.is_dir():
+            _refuse_mixed(source)
         return Campaign(source, test=layout.test, decimal_comma=layout.decimal_comma)
     return ColumnCampaign(source, layout)
+
+
+def _refuse_mixed(folder: Path) -> None:
+    """ValueError when a TRC folder also holds column-layout record files (its own step and
+    modes files, in any extension, are not such files)."""
+    trc_files = {p for files in config_files(folder).values() for p in files.values()}
+    foreign = sorted(
+        (p.name for p in folder.iterdir()
+         if is_column_file(p) and p not in trc_files and not is_trc_source(p)),
+        key=natural_key,
+    )  # fmt: skip
+    if foreign:
+        more = len(foreign) - 3
+        shown = ", ".join(foreign[:3]) + (f" and {more} more" if more > 0 else "")
+        raise ValueError(
+            f"{folder}: mixed folder: TRC data files (ConfigN_PRT_AssembA[_R]) and column-layout "
+            f"files ({shown}); a campaign is one or the other: move one kind to its own folder"
+        )

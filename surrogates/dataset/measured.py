@@ -16,6 +16,7 @@ import json
 import math
 import warnings
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -37,19 +38,22 @@ from surrogates.labels import MisfitPolicy, label_misfit, misfit_weight
 from surrogates.runtime import MASK_CHANNEL
 
 
-def record_labels(records: Sequence[Record], model: JointModel, names: Sequence[str]) -> np.ndarray:
+def record_labels(
+    records: Sequence[Record], model: JointModel, names: Sequence[str], **options: Any
+) -> np.ndarray:
     """Parameters of each record alone: least squares on the model's own terms.
 
     The paper labels its measured backbones by identifying each record; with
     the model's support fixed (no thresholding) that is a well-posed fit of
     the same parameters, record by record. Shape parameters keep the model's
     values. Returns ``(n_records, len(names))``, rows in the order of ``records``
-    (the labels :func:`add_measured` takes).
+    (the labels :func:`add_measured` takes). ``options`` go to the identification
+    (its preprocessing: ``edge_periods``, ``band_hz``).
     """
     shapes = {t.effect: dict(t.shape) for t in model.terms if t.shape}
     rows = []
     for record in records:
-        fitted = identify(record, model.effects, threshold=None, shapes=shapes).model
+        fitted = identify(record, model.effects, threshold=None, shapes=shapes, **options).model
         values = {**model.parameters, **fitted.parameters}
         rows.append([values[n] for n in names])
     return np.array(rows)
