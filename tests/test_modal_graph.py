@@ -162,6 +162,13 @@ def test_a_batch_of_1000_sets_equals_the_loop_over_them(two_mode_graph):
             np.testing.assert_allclose(b[i], s[0], rtol=1e-13, atol=0)
 
 
+def test_a_set_it_cannot_evaluate_gives_nan_not_an_error(two_mode_graph):
+    bad = np.array([NOMINAL, NOMINAL * [-1, 1, 1, 1, 1, 1, 1], NOMINAL * [1, 1, -1, 1, 1, 1, 1]])
+    backbone, _, converged, _ = two_mode_graph(bad)
+    assert converged[0].all() and not converged[1:].any()
+    assert np.isfinite(backbone[0]).all() and np.isnan(backbone[1:, :, 1:]).all()
+
+
 def test_forward_model_registration_and_its_contract():
     model = two_mode()
     op = forward_model("modal_harmonic", model, NAMES[:2], amplitudes_m=AMPLITUDES, mode=1)

@@ -335,9 +335,10 @@ def modal_backbone_graph(
         for j in range(model.n_joints):
             q = sum((phi[j][m] * y[m] for m in range(n)), _ZERO)
             moving = q.abs2() > 0
-            # A joint the motion does not reach gets a stand-in amplitude (the
-            # friction gains diverge at 0); its gain multiplies Q = 0 there.
-            q_abs = pt.sqrt(pt.switch(moving, q.abs2(), 1.0)) + pt.zeros_like(a)
+            # A joint the motion does not reach is read at a millionth of the locked
+            # amplitude: its small-amplitude limit (stuck, for friction, whose gains
+            # diverge at 0), keeping the gradient finite.
+            q_abs = pt.sqrt(pt.switch(moving, q.abs2(), (1e-6 * a) ** 2))
             gain, per_omega_squared = _ZERO, 0.0
             for c, effect, joint, shape in elements:
                 if joint != j:
