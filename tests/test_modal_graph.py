@@ -136,6 +136,7 @@ def test_one_mode_is_the_one_mode_graph_alone_and_beside_an_uncoupled_mode():
         np.testing.assert_array_equal(np.isnan(got), np.isnan(expected))
 
 
+@pytest.mark.slow  # compiling the gradient graph takes minutes
 def test_gradient_equals_central_differences():
     model = two_mode()
 
