@@ -254,7 +254,7 @@ def _decay_modes(workspace: Any, args: argparse.Namespace) -> None:
     """``backbones --test free-decay --modes N`` (N ≥ 2): each mode's backbone."""
     from pm_joint.pipeline import campaign_decay_modes
 
-    decays = campaign_decay_modes(workspace, args.modes)
+    decays = campaign_decay_modes(workspace, args.modes, mode_shapes=args.mode_shapes)
     for decay in decays:
         print("\n".join(decay.summary()))
     print(f"extracted {len(decays)} decay(s) by mode ({args.modes} modes) to "

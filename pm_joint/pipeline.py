@@ -219,12 +219,20 @@ def _mode_shapes(
     return read_modes(mode_shapes, decimal_comma=workspace.layout.decimal_comma, points=None)
 
 
-def campaign_decay_modes(workspace: Workspace, n_modes: int) -> list[ModalDecay]:
+def campaign_decay_modes(
+    workspace: Workspace,
+    n_modes: int,
+    *,
+    mode_shapes: str | os.PathLike | Modes | None = None,
+) -> list[ModalDecay]:
     """Each record's free decay by mode (``--test free-decay --modes N``): the
-    :class:`~identification.measurements.decay_modes.ModalDecay` of each, written as one
-    table (:func:`~identification.measurements.decay_modes.modal_decay_table`) to the
+    :class:`~identification.measurements.decay_modes.ModalDecay` of each (several sensors
+    through their modal filter, shapes as for :func:`campaign_modal_backbones`), written as
+    one table (:func:`~identification.measurements.decay_modes.modal_decay_table`) to the
     workspace's CSV."""
-    decays = [record_decay_modes(r, n_modes, **workspace.decay_options) for r in workspace.records]
+    shapes = _mode_shapes(mode_shapes, workspace)
+    decays = [record_decay_modes(r, n_modes, shapes, **workspace.decay_options)
+              for r in workspace.records]  # fmt: skip
     atomic_write_text(workspace.backbones_csv, modal_decay_table(decays).to_csv(index=False))
     return decays
 

@@ -52,6 +52,8 @@ from identification.measurements.decay_sensor import (
     sensor_mode_points,
 )
 from identification.measurements.local_fit import dominant_frequency_hz
+from identification.measurements.modal_backbones import _sensor_signals, record_modal_filter
+from identification.measurements.modes import Modes
 from identification.measurements.quantities import mean_offsets
 
 __all__ = [
@@ -336,14 +338,29 @@ def _record_inputs(record: Any, options: dict[str, Any]) -> dict[str, Any]:
             "steps": record.steps, **kept}  # fmt: skip
 
 
-def record_decay_modes(record: Any, n_modes: int, **options: Any) -> ModalDecay:
-    """:func:`decay_backbones_by_mode` of a record's response (one sensor), its file named
-    in any error; ``options``: the command line's decay options."""
+def record_decay_modes(
+    record: Any, n_modes: int, mode_shapes: Modes | None = None, **options: Any
+) -> ModalDecay:
+    """:func:`decay_backbones_by_mode` of a record, its file named in any error.
+
+    A record of several sensors (the TRC panel points, ``--response a,b,c``) is read through
+    the modal filter of its sensors, with the shapes of ``mode_shapes`` (a ``--mode-shapes``
+    file), else of the record's modes file, else estimated from the record
+    (:func:`~identification.measurements.modal_backbones.record_modal_filter`); a record of
+    one sensor by the joint local fit of the modes' bands. ``options``: the command line's
+    decay options.
+    """
     where = str(record.path or record.name)
+    inputs = _record_inputs(record, options)
+    signals = record.response
     try:
-        return decay_backbones_by_mode(record.time_s, record.response, n_modes=n_modes,
-                                       label=record.name, source=where,
-                                       **_record_inputs(record, options))  # fmt: skip
+        if len(getattr(record, "sensor_names", ())) > 1:
+            modal_filter = record_modal_filter(record, n_modes, mode_shapes)
+            signals, inputs["quantity"] = _sensor_signals(record)
+            inputs |= {"shapes": modal_filter.shapes,
+                       "frequencies_hz": modal_filter.frequencies_hz}  # fmt: skip
+        return decay_backbones_by_mode(record.time_s, signals, n_modes=n_modes,
+                                       label=record.name, source=where, **inputs)  # fmt: skip
     except ValueError as exc:
         message = str(exc)
         raise ValueError(message if message.startswith(where) else f"{where}: {message}") from None
