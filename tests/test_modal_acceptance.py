@@ -105,3 +105,57 @@ def test_decay_backbones_follow_the_nonlinear_modes(tmp_path, mode, amplitude_m)
     damping = PchipInterpolator(np.log(grid), truth.damping_ratio)(np.log(a_m))
     np.testing.assert_allclose(mine["frequency_hz"], frequency, rtol=FREQUENCY_RTOL)
     np.testing.assert_allclose(mine["damping_ratio"], damping, rtol=DAMPING_RTOL)
+
+
+# ------------------------------------------------------------------ one sensor near 1:2
+
+#: ``κ q1² q2`` of the one-sensor decay: mode 2's slaved response is 5 % of mode 1's at 1 mm.
+ONE_SENSOR_KAPPA = 2e6
+ONE_SENSOR_F_HZ, ONE_SENSOR_ZETA = (122.0, 243.0), (0.004, 0.003)
+
+
+def test_one_sensor_decay_near_one_to_two(tmp_path, capsys):
+    """One sensor seeing both modes of a ``κ q1² q2`` pair near 1:2, time stamps rounded to 7
+    digits: ``--modes 2`` gives both modes' backbones, and the one-mode request prints the
+    warning line naming mode 2's frequency.
+
+    Both modes ring here, and mode 2's free part at ω2 ≈ 2ω1 drives mode 1 through
+    ``2κ q1 q2`` at ω2 − ω1 ≈ ω1: energy goes back and forth, which no single nonlinear
+    mode carries. Frequencies hold the nonlinear modes' to 0.05 %, mode 2's damping to 2 %;
+    mode 1's damping is held to 5 % (the exchange modulates its decay rate by a few %).
+    """
+    system = ModalSystem(ONE_SENSOR_F_HZ, ONE_SENSOR_ZETA,
+                         couplings=(PotentialTerm(ONE_SENSOR_KAPPA, (2, 1)),))  # fmt: skip
+    decay = modal_free_decay(system, (1e-3, 0.3e-3), sensor_shapes=[[1.0, 0.8]],
+                             duration_s=1.0, time_digits=7)  # fmt: skip
+    assert np.ptp(np.diff(decay.time_s)) > 0  # the rounded stamps jitter
+    noisy = decay.displacement_m + np.random.default_rng(7).normal(0, 1e-8, decay.time_s.size)
+    path = tmp_path / "ring.csv"
+    pd.DataFrame({"time": decay.time_s, "displacement": noisy[0]}).to_csv(path, index=False)
+    options = ["--test", "free-decay", "--response", "displacement", "--quantity",
+               "displacement"]  # fmt: skip
+    assert cli(["backbones", str(path), *options, "--modes", "2", "--out",
+                str(tmp_path / "two.csv")]) == 0  # fmt: skip
+    rows = pd.read_csv(tmp_path / "two.csv")
+    model = ModalModel(
+        modes=tuple(Mode(f, z, 1.0) for f, z in zip(ONE_SENSOR_F_HZ, ONE_SENSOR_ZETA,
+                                                    strict=True)),
+        joint_shapes=(),
+        couplings=(Coupling(1, (1, 1), 2 * ONE_SENSOR_KAPPA),
+                   Coupling(2, (2, 0), ONE_SENSOR_KAPPA)),
+    )  # fmt: skip
+    for mode, shape, damping_rtol in ((1, 1.0, 0.05), (2, 0.8, DAMPING_RTOL)):
+        mine = rows[rows["mode"] == mode]
+        assert len(mine) >= 20
+        a_m = mine["amplitude_mm"].to_numpy() / 1e3 / shape
+        grid = np.geomspace(0.5 * a_m.min(), 1.2 * a_m.max(), 40)
+        truth = nonlinear_modes(model, grid, mode=mode, settings=HarmonicSettings(harmonics=5))
+        frequency = PchipInterpolator(np.log(grid), truth.frequency_hz)(np.log(a_m))
+        damping = PchipInterpolator(np.log(grid), truth.damping_ratio)(np.log(a_m))
+        np.testing.assert_allclose(mine["frequency_hz"], frequency, rtol=FREQUENCY_RTOL)
+        np.testing.assert_allclose(mine["damping_ratio"], damping, rtol=damping_rtol)
+    capsys.readouterr()
+    assert cli(["backbones", str(path), *options, "--out", str(tmp_path / "one.csv")]) == 0
+    warnings = [line for line in capsys.readouterr().err.splitlines() if "second mode" in line]
+    assert len(warnings) == 1
+    assert "second mode near 243.0 Hz" in warnings[0]
