@@ -15,7 +15,11 @@ they write test the library rather than repeat it.
   (defaults: the studies' fast campaigns' scatter and noise), the lab conditions, the
   out-of-catalogue joints of the lab scenarios;
 * :mod:`independent.decays` — ring-downs and base-driven steady states by DOP853, one mode or
-  several modes coupled through a joint and a modal potential, each mode's decay backbone.
+  several modes coupled through a joint and a modal potential, each mode's decay backbone;
+* :mod:`independent.modal_resonance` — the phase-resonance backbone of one mode of several
+  (a harmonic balance of its own, a distorted shaker if asked), every mode's participation;
+* :mod:`independent.modal_pll` — phase-locked tests of several modes (a PI loop on the locked
+  mode's phase, stepped levels, sensor noise, rounded time stamps) written as TRC folders.
 """
 
 from independent.campaigns import (
