@@ -246,7 +246,7 @@ def _cmd_backbones(args: argparse.Namespace) -> None:
     if args.test == "free-decay":
         from pm_joint.pipeline import decay_second_mode_warnings
 
-        for line in decay_second_mode_warnings(workspace):
+        for line in decay_second_mode_warnings(workspace, mode_shapes=args.mode_shapes):
             print(line, file=sys.stderr)
 
 

@@ -237,9 +237,14 @@ def campaign_decay_modes(
     return decays
 
 
-def decay_second_mode_warnings(workspace: Workspace) -> list[str]:
-    """One warning line per free-decay record that a one-mode reading leaves a second mode in."""
-    found = (record_second_mode(r, **workspace.decay_options) for r in workspace.records)
+def decay_second_mode_warnings(
+    workspace: Workspace, *, mode_shapes: str | os.PathLike | Modes | None = None
+) -> list[str]:
+    """One warning line per free-decay record that a one-mode reading leaves a second mode in
+    (a record of several sensors looked at through all of them, shapes as for
+    :func:`campaign_modal_backbones`)."""
+    shapes = _mode_shapes(mode_shapes, workspace)
+    found = (record_second_mode(r, shapes, **workspace.decay_options) for r in workspace.records)
     return [line for line in found if line is not None]
 
 

@@ -366,9 +366,27 @@ def record_decay_modes(
         raise ValueError(message if message.startswith(where) else f"{where}: {message}") from None
 
 
-def record_second_mode(record: Any, **options: Any) -> str | None:
-    """The warning line for a record read as one mode that carries a second (or None)."""
-    found = second_mode(record.time_s, record.response, **_record_inputs(record, options))
+def record_second_mode(record: Any, mode_shapes: Modes | None = None, **options: Any) -> str | None:
+    """The warning line for a record read as one mode that carries a second (or None).
+
+    A record of several sensors is looked at through all of them, by the modal filter of two
+    modes (shapes of ``mode_shapes``, else of its modes file, else estimated from the record:
+    :func:`~identification.measurements.modal_backbones.record_modal_filter`): one sensor may
+    sit on a mode's node line (the TRC panel's centre point on the torsion's). Where that
+    filter cannot be built, and on one sensor, the record's response is looked at.
+    """
+    inputs = _record_inputs(record, options)
+    signals = record.response
+    if len(getattr(record, "sensor_names", ())) > 1:
+        try:
+            modal_filter = record_modal_filter(record, 2, mode_shapes)
+        except ValueError:
+            modal_filter = None
+        if modal_filter is not None:
+            signals, inputs["quantity"] = _sensor_signals(record)
+            inputs |= {"shapes": modal_filter.shapes,
+                       "frequencies_hz": modal_filter.frequencies_hz}  # fmt: skip
+    found = second_mode(record.time_s, signals, **inputs)
     return None if found is None else second_mode_warning(*found, where=record.path or record.name)
 
 
