@@ -1,7 +1,7 @@
 """Phase-locked tests of a :class:`~independent.decays.ModalSystem`, written as TRC campaigns.
 
 A test steps the shaker through levels; at each a phase-locked loop holds one mode at phase
-resonance (its fundamental 90° behind the base acceleration's), and the panel's sensors record
+resonance (its fundamental 90° behind the effective force ``−a_base``), and the sensors record
 the hold. What is simulated, all in plain Python floats (no library code):
 
 * **the structure**: the modal equations of :class:`~independent.decays.ModalSystem`, every
@@ -18,9 +18,10 @@ the hold. What is simulated, all in plain Python floats (no library code):
 
 The state (modal displacements and velocities, the base velocity, ``φ``, ``I``, ``Q``, ``∫e``)
 is integrated by the classical fourth-order Runge–Kutta method on a fixed step, a fraction of
-the sampling interval, as a digital controller runs at its sampling rate. (scipy's DOP853 on
-the same equations costs about ten times as much per simulated second: a campaign of holds of
-several seconds is out of its reach in a test; ``test_independent_pll`` checks the two agree.)
+the sampling interval, as a digital controller runs at its sampling rate: scipy's DOP853 with a
+Python right-hand side spends many times as long per simulated second, too long for campaigns
+of holds of seconds in a test (``tests/test_modal_pll_acceptance.py`` checks the two agree on
+the open loop).
 
 :func:`write_trc_campaign` writes what the library reads: ``ConfigN_PRT_AssembA`` (time, 15
 panel velocities, 2 base velocities, frequency channel, oscillator phase), the step file of the
