@@ -92,6 +92,8 @@ class ModalResonance:
         ``A``.
     participation
         ``(n_amp, n_modes, H)`` complex ``P_k`` of harmonics ``k = 1..H`` of every mode (m).
+    mean_m
+        ``(n_amp, n_modes)`` every mode's mean ``C_0`` (m).
     converged
         Whether the balance met its tolerance; NaN elsewhere.
     """
@@ -102,6 +104,7 @@ class ModalResonance:
     damping_ratio: np.ndarray
     base_acceleration_m_s2: np.ndarray
     participation: np.ndarray
+    mean_m: np.ndarray
     converged: np.ndarray
 
 
@@ -231,14 +234,14 @@ def modal_phase_resonance(
         if ok:
             z = solution.x
         c, omega, big_a = balance.coefficients(solution.x, a)
-        rows.append((omega, big_a, c[:, 1::2] - 1j * c[:, 2::2], ok))
+        rows.append((omega, big_a, c[:, 1::2] - 1j * c[:, 2::2], c[:, 0], ok))
     omega = np.array([r[0] for r in rows])
     big_a = np.array([r[1] for r in rows])
-    converged = np.array([r[3] for r in rows])
+    converged = np.array([r[4] for r in rows])
     participation_m = np.array([r[2] for r in rows])
-    for values in (omega, big_a):
+    mean_m = np.array([r[3] for r in rows])
+    for values in (omega, big_a, participation_m, mean_m):
         values[~converged] = np.nan
-    participation_m[~converged] = np.nan
     return ModalResonance(
         mode=mode,
         amplitude_m=a_all,
@@ -246,5 +249,6 @@ def modal_phase_resonance(
         damping_ratio=gamma[mode - 1] * big_a / (2 * omega**2 * a_all),
         base_acceleration_m_s2=big_a,
         participation=participation_m,
+        mean_m=mean_m,
         converged=converged,
     )

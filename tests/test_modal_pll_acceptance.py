@@ -153,6 +153,35 @@ def test_the_independent_balance_is_the_librarys_phase_resonance():
         assert np.max(np.abs(theirs - mine.participation[..., :3])) < 1e-8 * amplitudes.max()
 
 
+@pytest.mark.parametrize(("mode", "amplitude_m"), [(1, 1.2e-3), (2, 6e-4)])
+def test_the_balance_state_is_periodic_under_dop853(mode, amplitude_m):
+    """The truth's state at the top of each range, started in DOP853 on the equations written
+    out here (base ``A·shape(ωt)`` with the shaker's orders), comes back to itself after ten
+    periods: it is the periodic motion the balance says, at phase resonance by construction."""
+    from scipy.integrate import solve_ivp
+
+    truth = modal_phase_resonance(_system(), mode, [amplitude_m], distortion=SHAKER)
+    omega, big_a = 2 * np.pi * truth.frequency_hz[0], truth.base_acceleration_m_s2[0]
+    p, k = truth.participation[0], np.arange(1, truth.participation.shape[-1] + 1)
+    y0 = np.concatenate([truth.mean_m[0] + p.real.sum(axis=1), (1j * k * omega * p).real.sum(1)])
+    w, z = 2 * np.pi * np.array(F_HZ), np.array(ZETA)
+
+    def rhs(t, y):
+        q, v = y[:2], y[2:]
+        u, udot = JOINT[0] * q[0] + JOINT[1] * q[1], JOINT[0] * v[0] + JOINT[1] * v[1]
+        joint = K3 * u**3 + C3 * udot**3
+        coupling = np.array([2 * KAPPA * q[0] * q[1], KAPPA * q[0] ** 2])
+        base = big_a * SHAKER.shape(omega * t)
+        acc = -(w**2) * q - 2 * z * w * v - np.array(JOINT) * joint - coupling - base
+        return np.concatenate([v, acc])
+
+    period = 2 * np.pi / omega
+    scale = np.concatenate([np.full(2, amplitude_m), np.full(2, amplitude_m * omega)])
+    end = solve_ivp(rhs, (0.0, 10 * period), y0, method="DOP853", rtol=1e-11,
+                    atol=1e-14 * scale).y[:, -1]  # fmt: skip
+    assert np.max(np.abs(end - y0) / scale) < 1e-6
+
+
 # ------------------------------------------------------------------------------ acceptance
 
 
