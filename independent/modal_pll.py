@@ -14,7 +14,11 @@ the hold. What is simulated, all in plain Python floats (no library code):
   frequency through a PI law ``ω = ω_L + k_p e + k_i ∫e dt`` from the mode's linear frequency;
   the low-pass leaves a ripple at ``2ω`` in the frequency channel, as a lab loop does;
 * **the lab**: white noise on every velocity channel (15 panel points, 2 base points), time
-  stamps rounded to a number of significant digits, the shaker's distortion.
+  stamps rounded to a number of significant digits, the shaker's distortion;
+* **drift** (:class:`FrequencyDrift`, off by default): every mode's linear frequency moves by
+  ``δ(t)``, linear in time over the campaign (temperature), by scaling its linear stiffness by
+  ``(1 + δ)²`` with its viscous coefficient ``2ζω`` unchanged, as the library's rig drifts its
+  modes; a record covers a stated part of its campaign.
 
 The state (modal displacements and velocities, the base velocity, ``φ``, ``I``, ``Q``, ``∫e``)
 is integrated by the classical fourth-order Runge–Kutta method on a fixed step, a fraction of
@@ -42,6 +46,8 @@ from independent.decays import ModalSystem, rounded_time_stamps
 from independent.modal_resonance import PURE_SINE, ShakerDistortion
 
 __all__ = [
+    "NO_DRIFT",
+    "FrequencyDrift",
     "LabNoise",
     "LoopSettings",
     "PLLRecord",
@@ -94,6 +100,44 @@ class LabNoise:
 
 
 @dataclass(frozen=True)
+class FrequencyDrift:
+    """A slow change of every mode's linear frequency over a campaign (e.g. temperature).
+
+    The modes' linear stiffnesses are scaled by ``(1 + δ(t))²``, their viscous coefficients
+    ``2ζω`` kept: the drifted system at ``δ`` is the system with frequencies ``(1 + δ) f`` and
+    damping ratios ``ζ / (1 + δ)``. ``δ`` grows linearly in time from 0 at the campaign's start
+    to ``frequency_over_campaign`` at its end; a record covers ``record_span`` of it (fractions
+    of the campaign at its first and last sample), linearly in its own time.
+
+    Attributes
+    ----------
+    frequency_over_campaign
+        The relative change of the linear frequencies over the campaign (0.005 is +0.5 %).
+    record_span
+        The part of the campaign (0…1) the record covers, from its start to its end.
+    """
+
+    frequency_over_campaign: float = 0.0
+    record_span: tuple[float, float] = (0.0, 1.0)
+
+    def __post_init__(self) -> None:
+        size, (start, end) = self.frequency_over_campaign, self.record_span
+        if not (math.isfinite(size) and size > -0.5):
+            raise ValueError(f"frequency_over_campaign must be finite and > −0.5, got {size}")
+        if not 0.0 <= start <= end <= 1.0:
+            raise ValueError(f"record_span must be 0 ≤ start ≤ end ≤ 1, got {self.record_span}")
+
+    def delta(self, record_fraction: float) -> float:
+        """``δ`` at ``record_fraction`` (0…1) of the record's duration."""
+        start, end = self.record_span
+        return self.frequency_over_campaign * (start + (end - start) * record_fraction)
+
+
+#: No drift: the modes keep their linear frequencies.
+NO_DRIFT = FrequencyDrift()
+
+
+@dataclass(frozen=True)
 class PLLRecord:
     """One phase-locked test, sampled.
 
@@ -143,7 +187,8 @@ class _Loop:
 
     def __init__(self, system: ModalSystem, participation: Sequence[float], mode: int,
                  distortion: ShakerDistortion, settings: LoopSettings,
-                 schedule: tuple[np.ndarray, np.ndarray]) -> None:  # fmt: skip
+                 schedule: tuple[np.ndarray, np.ndarray],
+                 drift: FrequencyDrift = NO_DRIFT) -> None:  # fmt: skip
         self.n = len(system.frequencies_hz)
         w = [float(x) for x in system.omega_rad_s]
         self.k = [x * x for x in w]
@@ -170,6 +215,10 @@ class _Loop:
         self.t_break = [float(x) for x in schedule[0]]
         self.levels = [float(x) for x in schedule[1]]
         self.segment = 0
+        # δ(t) = δ0 + (δ1 − δ0) t / t_end over the schedule; off, the stiffness scale is 1.0
+        # exactly and the record is the undrifted one bit for bit.
+        self.delta0 = drift.delta(0.0)
+        self.delta_rate = (drift.delta(1.0) - self.delta0) / self.t_break[-1]
 
     def level(self, t: float) -> float:
         """The schedule's level at ``t`` (linear between breakpoints); times only go forward."""
@@ -197,7 +246,9 @@ class _Loop:
         for h, d, psi in self.distortion:
             shape += d * math.sin(h * phase + psi)
         base = self.level(t) * shape
-        acc = [-self.k[i] * q[i] - self.c[i] * v[i] - self.gamma[i] * base for i in range(n)]
+        scale = (1.0 + self.delta0 + self.delta_rate * t) ** 2
+        acc = [-self.k[i] * scale * q[i] - self.c[i] * v[i] - self.gamma[i] * base
+               for i in range(n)]  # fmt: skip
         if self.joint:
             u = sum(p * x for p, x in zip(self.phi, q, strict=True))
             udot = sum(p * x for p, x in zip(self.phi, v, strict=True))
@@ -243,6 +294,7 @@ def pll_record(
     settings: LoopSettings = LoopSettings(),
     noise: LabNoise = LabNoise(),
     seed: int = 0,
+    drift: FrequencyDrift = NO_DRIFT,
 ) -> PLLRecord:
     """A phase-locked test of ``mode`` (from 1) of ``system`` at base levels ``levels_m_s2``.
 
@@ -264,6 +316,8 @@ def pll_record(
         The schedule and loop; the lab's noise and time stamps.
     seed
         Seed of the noise.
+    drift
+        The modes' linear-frequency drift over the record's part of its campaign.
 
     Returns
     -------
@@ -276,7 +330,7 @@ def pll_record(
         raise ValueError(f"sensor_shapes must be (S, {n}) and mode 1..{n}")
     gamma = [1.0] * n if participation is None else list(participation)
     schedule = _schedule(levels_m_s2, settings)
-    loop = _Loop(system, gamma, mode, distortion, settings, schedule)
+    loop = _Loop(system, gamma, mode, distortion, settings, schedule, drift)
     n_samples = round(schedule[0][-1] * settings.fs_hz) + 1
     h = 1.0 / (settings.fs_hz * settings.substeps)
     y = [0.0] * (2 * n + 5)
