@@ -218,7 +218,8 @@ class _Loop:
         # δ(t) = δ0 + (δ1 − δ0) t / t_end over the schedule; off, the stiffness scale is 1.0
         # exactly and the record is the undrifted one bit for bit.
         self.delta0 = drift.delta(0.0)
-        self.delta_rate = (drift.delta(1.0) - self.delta0) / self.t_break[-1]
+        duration = self.t_break[-1]
+        self.delta_rate = (drift.delta(1.0) - self.delta0) / duration if duration > 0 else 0.0
 
     def level(self, t: float) -> float:
         """The schedule's level at ``t`` (linear between breakpoints); times only go forward."""
