@@ -16,6 +16,10 @@ kinematics (:func:`modal_kinematics`):
   own harmonics that fall in another mode's band are read as that mode's (the
   sensor cannot tell them apart); several sensors avoid this.
 
+A free decay whose step file says when it was released or hit (the TRC layout's
+level 1 → 0) starts there (:func:`decay_onset`): before it the structure is held or
+at rest, and the hit itself is a force the equations do not carry.
+
 All coordinates of all records then pass one common band-pass (the harmonics
 ``1..n_harmonics`` of the lowest to the highest mode,
 :func:`~identification.measurements.signals.harmonic_band_hz`), so that the library's
@@ -34,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from identification.measurements.decay import decay_segments
 from identification.measurements.decay_sensor import mode_bands_hz, mode_frequencies_hz
 from identification.measurements.modal_backbones import _sensor_signals, record_modal_filter
 from identification.measurements.modes import Modes
@@ -43,7 +48,7 @@ from identification.measurements.trc_layout import CENTRE_POINT
 from identification.sindy import padding
 from identification.sindy.kinematics import DEFAULT_EDGE_PERIODS, sensor_kinematics
 
-__all__ = ["ModalKinematics", "ModalSettings", "modal_kinematics"]
+__all__ = ["ModalKinematics", "ModalSettings", "decay_onset", "modal_kinematics"]
 
 #: Periods of the lowest mode a one-sensor decay's spectral peak needs to count as a mode.
 PEAK_PERIODS = 6.0
@@ -109,6 +114,24 @@ class ModalKinematics:
         return self.modes[0].band_hz
 
 
+def decay_onset(record: Any, responses: np.ndarray) -> int:
+    """First sample of a free decay whose step file marks its release (else 0).
+
+    The onset is :func:`~identification.measurements.decay.decay_segments`'s on the
+    sensor with the largest response, from the step file's off interval; records
+    without steps (column files) start at their first sample.
+    """
+    steps = getattr(record, "steps", None)
+    if record.test != "free-decay" or steps is None or not np.any(np.asarray(steps.level)):
+        return 0
+    t = np.asarray(record.time_s, dtype=float)
+    y = np.asarray(responses, dtype=float).reshape(t.size, -1)
+    strongest = y[:, int(np.argmax(np.sqrt(np.mean(y**2, axis=0))))]
+    rate = (t.size - 1) / (t[-1] - t[0])
+    segments = decay_segments(t, strongest, rate, steps=steps)
+    return segments[0][0] if segments else 0
+
+
 class _Coordinates:
     """A record's raw modal coordinates (before the common band-pass)."""
 
@@ -117,10 +140,12 @@ class _Coordinates:
         self.t = np.asarray(record.time_s, dtype=float)
         signals, self.quantity = _sensor_signals(record)
         signals = np.asarray(signals, dtype=float).reshape(self.t.size, -1)
+        start = decay_onset(record, signals)
+        self.t, signals = self.t[start:], signals[start:]
         names = tuple(record.sensor_names)
         rate = (self.t.size - 1) / (self.t[-1] - self.t[0])
         driven = record.test != "free-decay" and getattr(record, "base_driven", True)
-        base = record.excitation_velocity if driven else None
+        base = np.asarray(record.excitation_velocity)[start:] if driven else None
         self.base_velocity = None if base is None else np.asarray(base, dtype=float)
         if signals.shape[1] == 1:
             self.frequencies_hz = mode_frequencies_hz(signals[:, 0], rate, n_modes, PEAK_PERIODS)
@@ -132,7 +157,7 @@ class _Coordinates:
             return
         modal_filter = record_modal_filter(record, n_modes, mode_shapes)
         self.frequencies_hz = np.asarray(modal_filter.frequencies_hz, dtype=float)
-        self.values = modal_filter.scaled_coordinates(signals)
+        self.values = modal_filter.scaled_coordinates(signals)  # shapes from the whole record
         if joint is None:
             index = CENTRE_POINT - 1 if isinstance(record, Record) else 0
         elif joint in names:
