@@ -195,7 +195,8 @@ def _record_rows(kin: ModalKinematics, columns: Sequence[_Column]) -> list[np.nd
     x = np.array([k.displacement for k in kin.modes])
     # A coordinate's slow mean (a coupling's quasi-static push, x2 ~ −κx1²/2ω2²) is out of
     # the band but inside the nonlinear columns (x1·x2): a measured one is added back.
-    full = x + np.array([0.0 if k.mean_offset is None else k.mean_offset for k in kin.modes])
+    full = np.array([k.displacement if k.mean_offset is None else k.displacement + k.mean_offset
+                     for k in kin.modes])  # fmt: skip
     v = np.array([k.velocity for k in kin.modes])
     q, qdot = kin.joint_shape @ full, kin.joint_shape @ v
     raw_joint = {c.name: c.term.feature(q, qdot) for c in columns if c.kind == "joint"}
