@@ -1,0 +1,60 @@
+"""Prediction with identified N-mode models: the acceptance of issue 27 on held-out decays.
+
+The two-mode model identified by ``identify --modes 2`` and the one-mode model of today's
+identification, both from the same tuning-seed decays of the independent simulator's
+two-mode truth (:mod:`studies.modal_identification`), predict decays on held-out seeds;
+the two-mode model's NMTE must be at most half the one-mode model's. The rig's case
+(``pm-joint rig --preset two-mode --test free-decay``) is the slow test and
+``bench/identify_modes.py``.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from identification.effects import LINEAR_STIFFNESS, VISCOUS_DAMPING
+from identification.sindy.identify import identify
+from identification.sindy.modal_identify import identify_modes
+from pm_joint.cli import main
+from studies import modal_identification as case
+from studies.seeds import HELD_OUT_SEED
+
+TWO_MODE_EFFECTS = ["quadratic_damping", "cubic_damping"]
+ONE_MODE_EFFECTS = [LINEAR_STIFFNESS, VISCOUS_DAMPING, "quadratic_damping", "cubic_stiffness",
+                    "quadratic_stiffness"]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory):
+    records = case.decay_records(range(2), tmp_path_factory.mktemp("train"), duration_s=0.4)
+    two = identify_modes(records, 2, TWO_MODE_EFFECTS, mode_shapes=case.MODE_SHAPES).model
+    one = identify(records, ONE_MODE_EFFECTS, edge_periods=2.0).model
+    return two, one
+
+
+def test_two_modes_halve_the_one_mode_error_on_held_out_decays(models, tmp_path):
+    held_out = case.decay_records([HELD_OUT_SEED, HELD_OUT_SEED + 1], tmp_path)
+    result = case.compare(*models, held_out, mode_shapes=case.MODE_SHAPES)
+    assert result.ratio <= case.RATIO_TARGET
+
+
+def test_predict_command_on_an_identified_modal_model(models, tmp_path, capsys):
+    two, _ = models
+    (record,) = case.decay_records([HELD_OUT_SEED + 2], tmp_path)
+    shapes = tmp_path / "shapes.txt"
+    shapes.write_text(case.MODE_SHAPES.to_text())
+    model = two.to_json(tmp_path / "two.json")
+    out = tmp_path / "prediction.csv"
+    code = main(["predict", "--model", str(model), str(record.path), "--test", "free-decay",
+                 "--response", ",".join(case.SENSORS), "--quantity", "displacement",
+                 "--mode-shapes", str(shapes), "--out", str(out)])  # fmt: skip
+    (line,) = capsys.readouterr().out.strip().splitlines()
+    assert code in (0, None) and line.startswith("NMTE ") and line.endswith(" %")
+    assert out.read_text().splitlines()[0] == "time," + ",".join(case.SENSORS)
+    summary = json.loads(out.with_name(out.name + ".json").read_text())
+    assert set(summary["per_sensor_nmte"]) == set(case.SENSORS)
+    assert float(line.split()[1]) == pytest.approx(100 * summary["nmte"], abs=0.006)
+    np.testing.assert_allclose(summary["sensor_shapes"], case.MODE_SHAPES.shapes, atol=1e-9)
