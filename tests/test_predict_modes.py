@@ -58,3 +58,25 @@ def test_predict_command_on_an_identified_modal_model(models, tmp_path, capsys):
     assert set(summary["per_sensor_nmte"]) == set(case.SENSORS)
     assert float(line.split()[1]) == pytest.approx(100 * summary["nmte"], abs=0.006)
     np.testing.assert_allclose(summary["sensor_shapes"], case.MODE_SHAPES.shapes, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_two_modes_halve_the_one_mode_error_on_the_rigs_held_out_decays(tmp_path):
+    """The two-mode rig (its own truth: microslip and hardening joint, quadratic coupling,
+    lab artefacts), identified on one campaign and predicted on a held-out one."""
+    train, held = tmp_path / "train", tmp_path / "held"
+    rig = ["rig", "--preset", "two-mode", "--test", "free-decay", "--assemblies"]
+    assert main([*rig, "2", "--seed", "0", "--out", str(train)]) in (0, None)
+    assert main([*rig, "1", "--seed", str(HELD_OUT_SEED), "--out", str(held)]) in (0, None)
+    two, one = tmp_path / "two.json", tmp_path / "one.json"
+    options = ["--test", "free-decay"]
+    assert main(["identify", str(train), "--modes", "2", *options, "--out", str(two)]) in (0, None)
+    assert main(["identify", str(train), *options, "--out", str(one)]) in (0, None)
+    (record,) = sorted(p for p in held.glob("*_Assemb*") if p.is_file())
+    errors = {}
+    for name, model in (("two", two), ("one", one)):
+        out = tmp_path / f"{name}.csv"
+        assert main(["predict", "--model", str(model), str(record), *options,
+                     "--out", str(out)]) in (0, None)  # fmt: skip
+        errors[name] = json.loads(out.with_name(out.name + ".json").read_text())["nmte"]
+    assert errors["two"] <= case.RATIO_TARGET * errors["one"]

@@ -18,6 +18,13 @@ the :class:`~identification.multimode.model.ModalModel` are regressed all at onc
   coefficient ``κ_p`` entering equation ``m`` as ``κ_p ∂V_p/∂x_m``. Couplings therefore
   exchange energy between the modes and never create it.
 
+**Modal masses.** The coordinates are each mode's contribution at its reference sensor,
+and every equation has unit mass in them, as the ModalModel's equations and the two-mode
+rig's truth do. A potential in these coordinates is the physical one when the shapes are
+mass-normalised and 1 at their reference sensors; otherwise the couplings still fit, but the
+mode-to-mode ratios of a monomial's forces carry the modal masses' ratio and the potential
+form constrains them wrongly (one sensor whose shapes differ per mode is the common case).
+
 **Admissibility.** Consistent energy exchange holds by construction (above). A catalogue
 effect that is a polynomial of the displacement alone (linear, quadratic and cubic
 stiffness) *is* a combination of couplings on ``q``; it is read as those couplings (a
@@ -266,8 +273,6 @@ class _Problem:
         self.total = sum(self.grams)
         self.target = float(self.total[-1, -1])
         self.columns = list(columns)
-        self.rows = per_record
-        self.weights = weights
 
     def cv_error(self, support: np.ndarray) -> float:
         """RMS of the held-out residual, every block left out once, over the target's RMS."""
