@@ -55,11 +55,13 @@ def _predict(model: Path, record: Path, options: list[str], out: Path) -> float:
     return json.loads(Path(f"{out}.json").read_text())["nmte_percent"]
 
 
-def _case(name: str, train: Path, held_out: list[Path], options: list[str], work: Path):
+def _case(name: str, train: Path, held_out: list[Path], options: list[str], work: Path,
+          n_train: int = 3):  # fmt: skip
     two, one = work / f"{name}_two.json", work / f"{name}_one.json"
     started = time.perf_counter()
-    _run(["identify", str(train), "--modes", "2", *options, "--out", str(two)])
-    _run(["identify", str(train), *options, "--out", str(one)])
+    identify = ["identify", str(train), *options, "--records", str(n_train)]
+    _run([*identify, "--modes", "2", "--out", str(two)])
+    _run([*identify, "--out", str(one)])
     two_nmte = [_predict(two, r, options, work / f"{name}_two_{r.name}.csv") for r in held_out]
     one_nmte = [_predict(one, r, options, work / f"{name}_one_{r.name}.csv") for r in held_out]
     ratio = float(np.mean(two_nmte) / np.mean(one_nmte))
@@ -88,8 +90,7 @@ def _independent(work: Path, n_train: int, n_held_out: int) -> dict:
     options = ["--test", "free-decay", "--response", ",".join(case.SENSORS), "--quantity",
                "displacement", "--mode-shapes", str(shapes)]  # fmt: skip
     # identify reads the folder of column files as a campaign, the training decays all of it.
-    return _case("independent", folder, [Path(r.path) for r in records],
-                 [*options, "--records", str(n_train)], work)  # fmt: skip
+    return _case("independent", folder, [Path(r.path) for r in records], options, work, n_train)
 
 
 def _rig(work: Path, assemblies: int) -> dict:
@@ -101,7 +102,8 @@ def _rig(work: Path, assemblies: int) -> dict:
                   "--assemblies", str(assemblies), "--seed", str(seed)])  # fmt: skip
         campaigns[label] = folder
     held_out = sorted(p for p in campaigns["rig_held_out"].glob("*_Assemb*") if p.is_file())
-    return _case("rig", campaigns["rig_train"], held_out, ["--test", "free-decay"], work)
+    return _case("rig", campaigns["rig_train"], held_out, ["--test", "free-decay"], work,
+                 assemblies)  # fmt: skip
 
 
 def main_bench() -> None:
