@@ -91,15 +91,12 @@ class ModalKinematics:
         ``(N,)`` the modes' linear frequencies as the filter (or spectrum) gives them.
     joint_shape
         ``(N,)`` each coordinate's contribution to the joint coordinate.
-    driven
-        Whether a base excitation drives the record.
     """
 
     label: str
     modes: tuple[Kinematics, ...]
     frequencies_hz: np.ndarray
     joint_shape: np.ndarray
-    driven: bool
 
     @property
     def valid(self) -> slice:
@@ -221,6 +218,5 @@ def modal_kinematics(
                               band_hz=band, edge_periods=settings.edge_periods)
             for m in range(n_modes)
         )  # fmt: skip
-        out.append(ModalKinematics(c.label, modes, c.frequencies_hz, c.joint_shape,
-                                   c.base_velocity is not None))  # fmt: skip
+        out.append(ModalKinematics(c.label, modes, c.frequencies_hz, c.joint_shape))
     return out

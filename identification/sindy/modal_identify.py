@@ -5,11 +5,15 @@
 bands of one sensor) and the joint coordinate ``q = Σ_m φ_m x_m``. The equations of
 the :class:`~identification.multimode.model.ModalModel` are regressed all at once:
 
-    −ẍ_m = ω_m² x_m + 2ζ_m ω_m ẋ_m + Σ_e c_e φ_m f_e(q, q̇) + Σ_p κ_p ∂V_p/∂x_m − Γ_m a_base
+    −(ẍ_m + Γ_m a_base) = ω_m² x_m + 2ζ_m ω_m ẋ_m + Σ_e c_e φ_m f_e(q, q̇) + Σ_p κ_p ∂V_p/∂x_m
 
 **Library per modal equation.**
 
-* The mode's own linear pair (always kept) and, for a driven record, its participation.
+* The mode's own linear pair (always kept). The participation ``Γ_m`` of a base-driven
+  record is fixed to :data:`PARTICIPATION`, as the one-mode model's: at phase resonance the
+  base acceleration is in phase with the velocity, so only damping over participation is
+  measured; 1 is the coordinate's own convention (the mode's displacement at its reference
+  sensor relative to the base, as the two-mode rig defines it).
 * Catalogue effects on the joint coordinate, each with **one** coefficient ``c_e`` shared by
   every equation through the weights ``φ_m`` (virtual work): a conservative element keeps
   the equations conservative, a dissipative one dissipates.
@@ -76,6 +80,8 @@ __all__ = [
     "modal_library_effects",
 ]
 
+#: Participation ``Γ`` of every mode (module notes).
+PARTICIPATION = 1.0
 #: Blocks a single record is cut into for cross-validation.
 SINGLE_RECORD_FOLDS = 4
 #: Lowest threshold of the path (normalised coefficient).
@@ -87,14 +93,14 @@ class _Column:
     """One library column: what it is, and the coefficient it feeds."""
 
     name: str
-    kind: str  # "stiffness", "damping", "participation", "joint", "coupling"
+    kind: str  # "stiffness", "damping", "joint", "coupling"
     mode: int = 0  # the equation, for a mode's own terms (from 0)
     term: LibraryTerm | None = None  # a joint effect
     powers: tuple[int, ...] = ()  # a potential monomial
 
     @property
     def always(self) -> bool:
-        return self.kind in ("stiffness", "damping", "participation")
+        return self.kind in ("stiffness", "damping")
 
 
 @dataclass(frozen=True, eq=False)
@@ -183,13 +189,11 @@ def _monomial_text(powers: Sequence[int]) -> str:
     return "V:" + "·".join(f"x{k + 1}{superscript[p]}" for k, p in enumerate(powers) if p)
 
 
-def _columns(n_modes: int, effects: Sequence[str], driven: bool) -> list[_Column]:
+def _columns(n_modes: int, effects: Sequence[str]) -> list[_Column]:
     columns = []
     for m in range(n_modes):
         columns += [_Column(f"mode{m + 1}.stiffness", "stiffness", m),
                     _Column(f"mode{m + 1}.damping", "damping", m)]  # fmt: skip
-        if driven:
-            columns.append(_Column(f"mode{m + 1}.participation", "participation", m))
     columns += [_Column(f"joint.{e}", "joint", term=LibraryTerm(e)) for e in effects]
     columns += [_Column(_monomial_text(p), "coupling", powers=p) for p in _monomials(n_modes)]
     return columns
@@ -231,13 +235,11 @@ def _record_rows(kin: ModalKinematics, columns: Sequence[_Column]) -> list[np.nd
                 rows[i] = x[m][valid]
             elif c.kind == "damping" and c.mode == m:
                 rows[i] = v[m][valid]
-            elif c.kind == "participation" and c.mode == m:
-                rows[i] = kin.modes[m].base_acceleration[valid]
             elif c.kind == "joint":
                 rows[i] = kin.joint_shape[m] * filtered[c.name]
             elif c.kind == "coupling" and c.powers[m]:
                 rows[i] = filtered[(c.name, m)]
-        rows[-1] = -kin.modes[m].acceleration[valid]
+        rows[-1] = -kin.modes[m].absolute_acceleration[valid]
         out.append(rows)
     return out
 
@@ -368,8 +370,7 @@ def identify_modal_kinematics(
         raise ValueError("no records given")
     n_modes = len(kins[0].modes)
     joint_effects, notes = modal_library_effects(effects)
-    driven = any(k.driven for k in kins)
-    columns = _columns(n_modes, joint_effects, driven)
+    columns = _columns(n_modes, joint_effects)
     problem = _Problem(kins, columns)
     check_rank(problem.total, [c.name for c in columns])
     support = _select(problem).copy()
@@ -395,15 +396,13 @@ def identify_modal_kinematics(
 
 def _model(columns, coefficients, kins, n_modes: int) -> ModalModel:
     """The ModalModel of the fitted coefficients."""
-    stiffness, damping, participation = np.zeros(n_modes), np.zeros(n_modes), np.ones(n_modes)
+    stiffness, damping = np.zeros(n_modes), np.zeros(n_modes)
     elements, couplings = [], []
     for c, value in zip(columns, coefficients, strict=True):
         if c.kind == "stiffness":
             stiffness[c.mode] = value
         elif c.kind == "damping":
             damping[c.mode] = value
-        elif c.kind == "participation":
-            participation[c.mode] = value
         elif value and c.kind == "joint":
             elements.append(JointElement(c.term.effect, float(value), dict(c.term.shape), 1))
         elif value:
@@ -420,7 +419,7 @@ def _model(columns, coefficients, kins, n_modes: int) -> ModalModel:
             raise ValueError(f"mode {m + 1}: the identified linear damping is negative "
                              f"({damping[m]:.4g} 1/s): it would put energy in")  # fmt: skip
         omega = math.sqrt(stiffness[m])
-        modes.append(Mode(omega / (2 * math.pi), damping[m] / (2 * omega), participation[m]))
+        modes.append(Mode(omega / (2 * math.pi), damping[m] / (2 * omega), PARTICIPATION))
     joint_shape = tuple(float(v) for v in np.mean([k.joint_shape for k in kins], axis=0))
     couplings.sort(key=lambda c: (c.mode, -sum(c.powers), tuple(-p for p in c.powers)))
     return ModalModel(tuple(modes), (joint_shape,), tuple(elements), tuple(couplings),
