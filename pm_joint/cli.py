@@ -297,10 +297,34 @@ def _cmd_identify(args: argparse.Namespace) -> None:
     from pm_joint.workspace import Workspace
 
     workspace = Workspace(args.dir, **_workspace_options(args))
+    if args.modes > 1:
+        _identify_modes(workspace, args)
+        return
     result = identify_campaign(workspace, args.effects, n_records=args.records, out=args.out,
                                **_identify_options(args))  # fmt: skip
     print(result.summary())
     print(result.model.equation())
+    print(f"wrote {args.out}")
+
+
+def _identify_modes(workspace: Any, args: argparse.Namespace) -> None:
+    """``identify --modes N`` (N ≥ 2): coupled modal equations, a ModalModel JSON."""
+    from identification.measurements.modes import read_modes
+    from identification.sindy.modal_coordinates import ModalSettings
+    from identification.sindy.modal_identify import identify_modes
+
+    shapes = None
+    if args.mode_shapes:
+        shapes = read_modes(args.mode_shapes, decimal_comma=args.decimal_comma or None, points=None)
+    records = workspace.records[: min(args.records, len(workspace.records))]
+    settings = ModalSettings(edge_periods=_identify_options(args)["edge_periods"],
+                             band_hz=args.band, joint_sensor=args.joint_sensor)  # fmt: skip
+    result = identify_modes(records, args.modes, args.effects, mode_shapes=shapes,
+                            settings=settings)  # fmt: skip
+    result.model.to_json(args.out)
+    print(result.summary())
+    for mode in range(1, args.modes + 1):
+        print(result.model.equation(mode))
     print(f"wrote {args.out}")
 
 
@@ -506,6 +530,21 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("--out", required=True, help="model JSON file")
     p.add_argument("--records", type=int, default=3, help="records fitted jointly (default 3)")
+    p.add_argument(
+        "--modes", type=_positive_int, default=1, metavar="N",
+        help="modes of the model (default 1: a joint model); 2 or more: coupled modal equations "
+        "(modal filter of the sensors, or the modes' bands of one sensor), a ModalModel JSON",
+    )  # fmt: skip
+    p.add_argument(
+        "--mode-shapes", metavar="FILE",
+        help="with --modes N: mode shapes at the sensors, as for backbones (default: the TRC "
+        "modes file, else estimated from the records)",
+    )  # fmt: skip
+    p.add_argument(
+        "--joint-sensor", metavar="NAME",
+        help="with --modes N: the sensor the joint coordinate is read at (default: the response "
+        "sensor, the TRC centre point or the first --response column)",
+    )  # fmt: skip
     add_record_options(p)
     p.set_defaults(func=_cmd_identify)
 

@@ -15,6 +15,9 @@ one-mode :class:`~identification.model.JointModel` or an N-mode
   one-mode model's coordinate is the response sensor's (the backbones' response: the first
   ``--response`` column, the TRC centre point), so the sensors see ``φ_s / φ_response``.
   On one sensor every mode's coordinate is its contribution to that sensor.
+* **Start.** A free decay whose step file marks its release or hit (TRC records) is
+  simulated from there (:func:`~identification.sindy.modal_coordinates.decay_onset`); the
+  model is at rest before it. Other records start at their first sample.
 * **Initial state.** Least squares over the first :attr:`PredictSettings.fit_periods`
   periods of the lowest mode: each mode's free linear response (its frequency and decay
   rate) gives a first guess, refined by least squares on the model's own simulation of the
@@ -53,6 +56,7 @@ from identification.measurements.trc_layout import CENTRE_POINT, N_PANEL_POINTS
 from identification.model import PRESETS, JointModel
 from identification.multimode.model import FORMAT as MODAL_FORMAT
 from identification.multimode.model import ModalModel
+from identification.sindy.modal_coordinates import decay_onset
 from pm_joint.predict_equations import ModelEquations, model_equations
 
 __all__ = [
@@ -505,6 +509,11 @@ def predict_record(
     signals = _signals(record, model)
     shapes = _sensor_shapes(record, model, eq.n_modes, signals, mode_shapes)
     quantity = record.quantity
+    # A decay released (or hit) after a held or resting head starts at the release: before
+    # it the model is at rest, and the hit is a force it does not carry.
+    start = decay_onset(record, signals.measured)
+    whole = signals
+    signals = signals._replace(time_s=signals.time_s[start:], measured=signals.measured[start:])
     sim = _Simulator(eq, signals, shapes, quantity, settings)
     t = signals.time_s
     rate = (t.size - 1) / (t[-1] - t[0])
@@ -519,8 +528,9 @@ def predict_record(
         )
     state = _initial_state(sim, n_fit)
     m = eq.n_modes
-    predicted = sim.response(eq.initial_state(state[:m], state[m:]), t.size)
-    measured = signals.measured
+    predicted = np.zeros_like(whole.measured)
+    predicted[start:] = sim.response(eq.initial_state(state[:m], state[m:]), t.size)
+    measured = whole.measured
     largest = np.linalg.norm(measured, axis=1).max()
     if not np.linalg.norm(predicted, axis=1).max() <= settings.divergence_factor * largest:
         raise SimulationDiverged(
@@ -533,7 +543,7 @@ def predict_record(
         for s, name in enumerate(signals.names)
     )
     return Prediction(
-        time_s=t, sensor_names=signals.names, quantity=quantity,
+        time_s=whole.time_s, sensor_names=signals.names, quantity=quantity,
         relative=not signals.absolute, measured=measured, predicted=predicted,
         nmte=nmte(predicted, measured, embedding), sensors=per_sensor,
         embedding_samples=embedding, fit_window_s=(float(t[0]), float(t[n_fit - 1])),
