@@ -52,7 +52,7 @@ from identification.measurements.decay_sensor import (
     sensor_mode_points,
 )
 from identification.measurements.local_fit import dominant_frequency_hz
-from identification.measurements.modal_backbones import _sensor_signals, record_modal_filter
+from identification.measurements.modal_backbones import record_modal_filter, sensor_signals
 from identification.measurements.modes import Modes
 from identification.measurements.quantities import mean_offsets
 
@@ -356,7 +356,7 @@ def record_decay_modes(
     try:
         if len(getattr(record, "sensor_names", ())) > 1:
             modal_filter = record_modal_filter(record, n_modes, mode_shapes)
-            signals, inputs["quantity"] = _sensor_signals(record)
+            signals, inputs["quantity"] = sensor_signals(record)
             inputs |= {"shapes": modal_filter.shapes,
                        "frequencies_hz": modal_filter.frequencies_hz}  # fmt: skip
         return decay_backbones_by_mode(record.time_s, signals, n_modes=n_modes,
@@ -383,7 +383,7 @@ def record_second_mode(record: Any, mode_shapes: Modes | None = None, **options:
         except ValueError:
             modal_filter = None
         if modal_filter is not None:
-            signals, inputs["quantity"] = _sensor_signals(record)
+            signals, inputs["quantity"] = sensor_signals(record)
             inputs |= {"shapes": modal_filter.shapes,
                        "frequencies_hz": modal_filter.frequencies_hz}  # fmt: skip
     found = second_mode(record.time_s, signals, **inputs)

@@ -74,6 +74,7 @@ __all__ = [
     "mode_backbones",
     "record_modal_filter",
     "second_mode_warnings",
+    "sensor_signals",
     "sidecar_path",
 ]
 
@@ -153,7 +154,7 @@ class _ModeSignal:
         return getattr(self._record, name)
 
 
-def _sensor_signals(record: Any) -> tuple[np.ndarray, str]:
+def sensor_signals(record: Any) -> tuple[np.ndarray, str]:
     """``(n, S)`` sensor responses relative to the base, and their quantity.
 
     As measured where they are relative already (or nothing moves the base); an
@@ -188,7 +189,7 @@ def record_modal_filter(record: Any, n_modes: int, mode_shapes: Modes | None = N
         )
     if given is not None:
         note = f" (the modes file {given.source} has {given.shapes.shape[1]} mode(s))"
-    signals, _ = _sensor_signals(record)
+    signals, _ = sensor_signals(record)
     try:
         estimated = estimate_shapes(record.time_s, signals, n_modes, names)
     except ValueError as exc:
@@ -227,7 +228,7 @@ def modal_curve(
     where = record.path or record.name
     if record.test == "free-decay":
         raise ValueError(f"{where}: a free decay is not read by the PLL holds' modal reader")
-    signals, quantity = _sensor_signals(record)
+    signals, quantity = sensor_signals(record)
     scaled = modal_filter.scaled_coordinates(signals)
     holds = record_holds(record)
     t = record.time_s

@@ -40,7 +40,7 @@ import numpy as np
 
 from identification.measurements.decay import decay_segments
 from identification.measurements.decay_sensor import mode_bands_hz, mode_frequencies_hz
-from identification.measurements.modal_backbones import _sensor_signals, record_modal_filter
+from identification.measurements.modal_backbones import record_modal_filter, sensor_signals
 from identification.measurements.modes import Modes
 from identification.measurements.record import Record
 from identification.measurements.signals import Kinematics, harmonic_band_hz
@@ -135,7 +135,7 @@ class _Coordinates:
     def __init__(self, record: Any, n_modes: int, mode_shapes: Modes | None, joint: str | None):
         self.label = str(record.path or record.name)
         self.t = np.asarray(record.time_s, dtype=float)
-        signals, self.quantity = _sensor_signals(record)
+        signals, self.quantity = sensor_signals(record)
         signals = np.asarray(signals, dtype=float).reshape(self.t.size, -1)
         start = decay_onset(record, signals)
         self.t, signals = self.t[start:], signals[start:]
