@@ -75,10 +75,17 @@ class Swap:
     significant); it is replaced when a replacement gains more than :data:`SEPARATION`
     (the data tell the two apart), is admissible and makes no channel worse beyond its
     noise. The best replacement wins over a removal; one change per round.
+
+    ``stand_ins``: terms of the model that a model-term group of the criticism before this
+    round's addition paired with the effect added (a SINDy start's ẋ² for x²). The data
+    could not do without them before; with the effect in, each is tried for removal by the
+    same rule as an earlier effect (no replacement: the effect just added is it), so a
+    stand-in the effect makes redundant does not stay beside it.
     """
 
     alternatives: Mapping[str, Sequence[str]]
     last: str
+    stand_ins: Sequence[str] = ()
 
     def apply(self, crit: Criticism) -> Criticism:
         """Every trial is recorded in ``swaps`` of the criticism returned: a copy of
@@ -90,14 +97,16 @@ class Swap:
         before = decision.channel_chi2(base)
         trials: list[SwapTrial] = []
         fits: list[FitResult] = []
-        for earlier in [e for e in self.alternatives if e in model and e != self.last]:
+        earlier_effects = [e for e in self.alternatives if e in model and e != self.last]
+        stand_ins = [t for t in self.stand_ins if t in model and t not in earlier_effects]
+        for earlier in [*earlier_effects, *stand_ins]:
             without = crit.refits.structure(model.without(earlier))
             cost = decision.chi2(without) - chi2
             why = "; ".join(fitted_problems(crit.data, without))
             trials.append(SwapTrial(earlier, None, -cost, False, why, REMOVE_IF.format(
                 threshold=decision.threshold)))  # fmt: skip
             fits.append(without)
-            for other in self.alternatives[earlier]:
+            for other in self.alternatives.get(earlier, ()):
                 if other in model:
                     continue
                 fit = crit.refits.structure(model.without(earlier).with_effect(other, 0.0))
@@ -181,7 +190,10 @@ def run_rounds(crit: Criticism, rounds: int, min_share: float = STOP_SHARE) -> l
     and a loop that stops.
 
     Each round adds the effect proposed first (:meth:`Criticism.missing`, :class:`Add`),
-    then runs the swap step (:class:`Swap`) over the effects added in earlier rounds.
+    then runs the swap step (:class:`Swap`) over the effects added in earlier rounds and
+    the model's terms that a model-term group paired with the effect just added (its
+    stand-ins: tried for removal, so that x² found beside SINDy's ẋ² does not leave ẋ²
+    behind once it explains what ẋ² stood in for).
     When nothing is proposed, a term of the model that the data prefer a catalogue effect
     in place of (:class:`SwapTerm`, e.g. a SINDy start's ẋ² for x²) is replaced first, as
     a round of its own that adds no effect (at most ``rounds`` such swaps). The loop stops
@@ -248,7 +260,8 @@ def run_rounds(crit: Criticism, rounds: int, min_share: float = STOP_SHARE) -> l
             break
         effect = best.effect
         alternatives[effect] = crit.alternatives(effect)
-        following = Swap(alternatives, effect).apply(Add(effect).apply(crit))
+        stand_ins = tuple(g.term for g in crit.term_groups if effect in g.alternatives)
+        following = Swap(alternatives, effect, stand_ins).apply(Add(effect).apply(crit))
         refused = problems_of(following)
         if refused:
             stop = Stop.INADMISSIBLE
