@@ -52,17 +52,18 @@ def test_a_start_term_standing_in_for_the_hidden_effect_is_grouped_with_it(arch)
     """The group of the model's ẋ² names quadratic stiffness, the truth's term, in words in
     the summary, the JSON and every round's report, preferred by more than SEPARATION.
 
-    What the data say beyond the group: ẋ² is not x² (its 2nd harmonic has the other
-    phase to the static offset and it does not soften the spring), so the start lacks
-    what x² does beyond ẋ². The design says how much: the start's structure refitted to
-    the noise-free truth misses it by a χ² λ far beyond SEPARATION (independent of the
-    campaign's noise). The linearised catalogue statistic sees about half of λ, so the
-    calibrated decision (α = 1 %) fires on most such campaigns, not all (tuning seeds 0–5:
-    4 of 6; held-out 1 000 000–1 000 005: see docs/criticism.md). On this campaign it fires
-    and x² is proposed first. Before issue #25's recalibration the bootstrap drew noise the
-    curves did not show (catalogue threshold 23.9 against 9.3 now for the same gain, 12.5;
-    p 0.077 against 0.0015), and the test claimed "nothing missing": that was the
-    conservative draw, not the physics."""
+    What the data say beyond the group: ẋ² is not x². With x = a·cos θ, x² = a²(1 + cos
+    2θ)/2 and ẋ² = a²ω²(1 − cos 2θ)/2: a coefficient that matches x²'s 2nd harmonic
+    gives a static force of the opposite sign, and the frequency's change through that
+    offset differs, so the start lacks what x² does beyond ẋ². The design says how much:
+    the start's structure refitted to the noise-free truth misses it by a χ² λ far
+    beyond SEPARATION (independent of the campaign's noise). The linearised catalogue
+    statistic sees about half of what the refit does (12.5 against Δχ² 24.8 here), so the calibrated decision (α = 1 %) fires on most
+    such campaigns, not all (tuning seeds 0–5: 5 of 6; held-out 1 000 000–1 000 005: see
+    docs/criticism.md). On this campaign it fires and x² is proposed first. Before issue
+    #25's recalibration the bootstrap drew noise the curves did not show (catalogue
+    threshold 23.9 against 9.3 now for the same gain, 12.5; p 0.077 against 0.0015), and
+    the test claimed "nothing missing": that was the conservative draw, not the physics."""
     truth, _, start, crit = arch
     assert start.coefficient("velocity_squared") > 0
     design = _design_separation(crit, truth, start)
