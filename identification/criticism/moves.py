@@ -189,14 +189,14 @@ def run_rounds(crit: Criticism, rounds: int, min_share: float = STOP_SHARE) -> l
     """Forward-backward stepwise selection from ``crit``: up to ``rounds`` effects added,
     and a loop that stops.
 
-    Each round adds the effect proposed first (:meth:`Criticism.missing`, :class:`Add`),
-    then runs the swap step (:class:`Swap`) over the effects added in earlier rounds and
-    the model's terms that a model-term group paired with the effect just added (its
-    stand-ins: tried for removal, so that x² found beside SINDy's ẋ² does not leave ẋ²
-    behind once it explains what ẋ² stood in for).
-    When nothing is proposed, a term of the model that the data prefer a catalogue effect
-    in place of (:class:`SwapTerm`, e.g. a SINDy start's ẋ² for x²) is replaced first, as
-    a round of its own that adds no effect (at most ``rounds`` such swaps). The loop stops
+    A term of the model that the data prefer a catalogue effect in place of
+    (:class:`SwapTerm`, e.g. a SINDy start's ẋ² for x²) is replaced first, whether or not
+    something is proposed: a round of its own that adds no effect (at most ``rounds`` such
+    swaps). Otherwise a round adds the effect proposed first (:meth:`Criticism.missing`,
+    :class:`Add`), then runs the swap step (:class:`Swap`) over the effects added in
+    earlier rounds and the model's terms that a model-term group paired with the effect
+    just added (its stand-ins: tried for removal, so that an effect found beside a term
+    that stood in for it does not leave the term behind). The loop stops
     (:class:`~identification.criticism.ending.Stop`) when the calibrated test does not
     fire; when it fires and nothing is proposed (no admissible candidate captures enough of
     the free-form reference's gain: the rest is not shaped like any candidate); when the
@@ -221,17 +221,21 @@ def run_rounds(crit: Criticism, rounds: int, min_share: float = STOP_SHARE) -> l
     n_added = term_swaps = 0
     while True:
         crit = chain[-1]
+        # The model's own terms are corrected before it is extended: a term the data prefer
+        # a catalogue effect in place of (beyond SEPARATION) is the wrong physics, and an
+        # effect added beside it would be judged against it (a SINDy start's ẋ² beside
+        # which x², linearised, looks small and another spring's shape is proposed).
+        swapped = SwapTerm().apply(crit) if term_swaps < rounds else None
+        refused = problems_of(swapped) if swapped is not None else ()
+        if swapped is not None and not refused:
+            step = swapped.history[-1]
+            how = f"in place of the model's {', '.join(step.removed)}"
+            added += [Added(e, None, None, how) for e in step.added]
+            chain.append(swapped)
+            term_swaps += 1
+            continue
         proposed = crit.missing()
         if not proposed:
-            swapped = SwapTerm().apply(crit) if term_swaps < rounds else None
-            refused = problems_of(swapped) if swapped is not None else ()
-            if swapped is not None and not refused:
-                step = swapped.history[-1]
-                how = f"in place of the model's {', '.join(step.removed)}"
-                added += [Added(e, None, None, how) for e in step.added]
-                chain.append(swapped)
-                term_swaps += 1
-                continue
             if not crit.significant:
                 stop, why = Stop.NOTHING_MISSING, "the calibrated test does not fire"
             else:
