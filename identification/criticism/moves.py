@@ -190,9 +190,11 @@ def run_rounds(crit: Criticism, rounds: int, min_share: float = STOP_SHARE) -> l
     and a loop that stops.
 
     A term of the model that the data prefer a catalogue effect in place of
-    (:class:`SwapTerm`, e.g. a SINDy start's ẋ² for x²) is replaced first, whether or not
-    something is proposed: a round of its own that adds no effect (at most ``rounds`` such
-    swaps). Otherwise a round adds the effect proposed first (:meth:`Criticism.missing`,
+    (:class:`SwapTerm`, e.g. a SINDy start's ẋ² for x²) is replaced when nothing is
+    proposed, or unless the first proposal's addition gains more ``χ²`` than the swap by
+    :data:`SEPARATION` (within it the moves cannot be told apart, and the swap adds no
+    parameter): a round of its own that adds no effect (at most ``rounds`` such swaps).
+    Otherwise a round adds the effect proposed first (:meth:`Criticism.missing`,
     :class:`Add`), then runs the swap step (:class:`Swap`) over the effects added in
     earlier rounds and the model's terms that a model-term group paired with the effect
     just added (its stand-ins: tried for removal, so that an effect found beside a term
@@ -221,11 +223,18 @@ def run_rounds(crit: Criticism, rounds: int, min_share: float = STOP_SHARE) -> l
     n_added = term_swaps = 0
     while True:
         crit = chain[-1]
-        # The model's own terms are corrected before it is extended: a term the data prefer
-        # a catalogue effect in place of (beyond SEPARATION) is the wrong physics, and an
-        # effect added beside it would be judged against it (a SINDy start's ẋ² beside
-        # which x², linearised, looks small and another spring's shape is proposed).
+        proposed = crit.missing()
+        # The better move first: a term the data prefer a catalogue effect in place of
+        # (beyond SEPARATION) is replaced when nothing is proposed, or unless the first
+        # proposal's addition gains more than the swap by SEPARATION (within it the data
+        # cannot tell the two moves apart, and the swap adds no parameter). Added beside a
+        # stand-in, an effect is judged against it: a SINDy start's ẋ² beside which x²,
+        # linearised, looks small while another spring's shape is proposed.
         swapped = SwapTerm().apply(crit) if term_swaps < rounds else None
+        if swapped is not None and proposed:
+            swap_gain = next(t.delta_chi2 for t in swapped.swaps if t.kept)
+            if (proposed[0].delta_chi2 or 0.0) - swap_gain > SEPARATION:
+                swapped = None
         refused = problems_of(swapped) if swapped is not None else ()
         if swapped is not None and not refused:
             step = swapped.history[-1]
@@ -234,7 +243,6 @@ def run_rounds(crit: Criticism, rounds: int, min_share: float = STOP_SHARE) -> l
             chain.append(swapped)
             term_swaps += 1
             continue
-        proposed = crit.missing()
         if not proposed:
             if not crit.significant:
                 stop, why = Stop.NOTHING_MISSING, "the calibrated test does not fire"
