@@ -15,7 +15,7 @@ from identification.fitting.least_squares import fit_backbones
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS
 from studies import StudyResult, simulated_campaign
-from studies.term_groups import _noise_free_twin, _twin_chi2
+from studies.term_groups import design_chi2
 
 W0 = 2 * np.pi * 101.0
 K0 = W0**2
@@ -42,13 +42,6 @@ def arch_loop(arch):
     return engine.run_rounds(crit, 3)
 
 
-def _design_separation(crit, truth: JointModel, model: JointModel) -> float:
-    """``model``'s structure refitted to the noise-free truth (the truth's prediction at the
-    campaign's points, in its metric): its ``χ²``, the noncentrality of its misfit."""
-    twin = _noise_free_twin(crit, truth)
-    return _twin_chi2(crit, twin, model)
-
-
 def test_a_start_term_standing_in_for_the_hidden_effect_is_grouped_with_it(arch):
     """The group of the model's ẋ² names quadratic stiffness, the truth's term, in words in
     the summary, the JSON and every round's report, preferred by more than SEPARATION.
@@ -68,7 +61,7 @@ def test_a_start_term_standing_in_for_the_hidden_effect_is_grouped_with_it(arch)
     missing": that was the conservative draw, not the physics."""
     truth, _, start, crit = arch
     assert start.coefficient("velocity_squared") > 0
-    design = _design_separation(crit, truth, start)
+    design = design_chi2(crit, truth, start)
     assert design > 2 * engine.SEPARATION
     assert crit.significant and crit.p_value <= crit.alpha, crit.summary()
     assert crit.verdict == "explained"
