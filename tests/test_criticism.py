@@ -398,19 +398,20 @@ def test_microslip_reading_is_specific():
 
 
 def test_quadratic_stiffness_needs_the_records():
-    """Backbones alone cannot name x²: its frequency shift is second order in k₂ and ∝ a² to
-    leading order, a cubic's (ω² ≈ k + ¾k₃a² − (5/6)k₂²a²/k), so the refitted cubic takes
-    most of it. What is left is the design's λ: the start's structure refitted to the
-    noise-free truth's backbones (independent of the campaign's noise) misses by less than
-    2 × SEPARATION, while with the records' harmonics it misses by hundreds. The
-    recalibrated test may see that rest (issue #25: on this campaign p = 0.0015, catalogue
-    gain 6.8 against a threshold of 3.8; before the recalibration the bootstrap's threshold
-    hid it and the test claimed "not significant" — a claim about the old draw, not the
-    physics), but it cannot attribute it: where it fires, the first proposal is in a group
-    of springs the backbones cannot separate, x² among them — never x² named alone, never an
-    effect outside that group. The records' second harmonic, which the extracted backbones
-    keep, reveals x², proposed alone and ranked above ẋ², which makes the same harmonic but
-    with the wrong amplitude dependence."""
+    """Backbones alone cannot name x²: its frequency shift is second order in k₂ and ∝ a²
+    to leading order, a cubic's (ω² ≈ k + ¾k₃a² − (5/6)k₂²a²/k), so the refitted cubic
+    takes most of it. What is left is the design's λ: the start's structure refitted to
+    the noise-free truth's backbones (independent of the campaign's noise) misses by
+    less than 2 × SEPARATION, while with the records' harmonics it misses by hundreds.
+    The recalibrated test may see that rest (issue #25: on this campaign p = 0.0015,
+    catalogue gain 6.8 against a threshold of 3.8; before the recalibration the
+    threshold was 24.1 for the same gain, p = 0.26, and the test claimed "not
+    significant" — a claim about the old draw, not the physics), but it cannot attribute
+    it: where it fires, the first proposal is in a group of springs the backbones cannot
+    separate, x² among them — never x² named alone, never an effect outside that group.
+    The records' second harmonic, which the extracted backbones keep, reveals x²,
+    proposed alone and ranked above ẋ², which makes the same harmonic but with the wrong
+    amplitude dependence."""
     result = study("hidden-quadratic")
     blind_data = result.measured.without_harmonics()
     blind = criticize(result.start, blind_data)
