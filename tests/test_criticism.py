@@ -412,8 +412,9 @@ def test_quadratic_stiffness_needs_the_records():
     The records' second harmonic, which the extracted backbones keep, reveals x²,
     proposed alone and ranked above ẋ², which makes the same harmonic but with the wrong
     amplitude dependence. Seen over seeds of this campaign's recipe: tuning 0 fires (a
-    group of four springs holding x²), tuning 1 does not; held-out 1 000 000 and 1 000
-    001 do not (p 0.29, 0.37); with the records x² is first and ungrouped on all four."""
+    group of four springs holding x²), tuning 1 does not; held-out 1_000_000 and
+    1_000_001 do not (p 0.29, 0.37); with the records x² is first and ungrouped on all
+    four."""
     result = study("hidden-quadratic")
     blind_data = result.measured.without_harmonics()
     blind = criticize(result.start, blind_data)
