@@ -167,10 +167,39 @@ class StudyResult:
         wrong = [e for e in self.added[: max(rounds, default=0)] if e not in self.truth]
         return not wrong
 
+    @cached_property
+    def stand_ins(self) -> dict[str, str]:
+        """Hidden rows: per hidden effect the start lacks, the start's term that the first
+        criticism's model-term groups pair it with — a term of the start standing in for
+        it (e.g. SINDy's ẋ² for x²) — whether the start is adequate or not (empty on
+        other rows, and for effects no group holds)."""
+        if self.kind != "hidden" or self.in_start:
+            return {}
+        groups = self.criticisms[0].term_groups
+        found = {}
+        for effect in (e for e in self.hidden if e not in self.start):
+            group = next((g for g in groups if effect in g.alternatives), None)
+            if group is not None:
+                found[effect] = group.term
+        return found
+
+    @cached_property
+    def _reference_fit(self) -> FitResult:
+        """What a hidden effect's worth is measured from: the first criticism's refitted
+        start, less the terms standing in for a hidden effect (:attr:`stand_ins`, the rest
+        refitted). A stand-in already takes part of the effect's error down; measured from
+        a start that holds one, the effect found would be credited only with what the
+        stand-in left."""
+        crit = self.criticisms[0]
+        model = crit.base.model
+        for term in dict.fromkeys(self.stand_ins.values()):
+            model = model.without(term)
+        return crit.base if model == crit.base.model else crit.refits.structure(model)
+
     def reduction(self, channel: str) -> float | None:
         """Fractional RMSE reduction of a channel from the first criticism's refitted model
-        to the last one's."""
-        before = getattr(self.criticisms[0].base, _STEP_RMSE[channel])
+        (less its :attr:`stand_ins`, refitted) to the last one's."""
+        before = getattr(self._reference_fit, _STEP_RMSE[channel])
         after = getattr(self.criticisms[-1].base, _STEP_RMSE[channel])
         return None if before is None or after is None else float(1 - after / before)
 
@@ -227,14 +256,9 @@ class StudyResult:
         consistent with; None unless every one of them is in such a group."""
         if not self.start_adequate:
             return None
-        groups = self.criticisms[0].term_groups
-        found = {}
-        for effect in (e for e in self.hidden if e not in self.start):
-            group = next((g for g in groups if effect in g.alternatives), None)
-            if group is None:
-                return None
-            found[effect] = group.term
-        return found
+        found = self.stand_ins
+        lacked = [e for e in self.hidden if e not in self.start]
+        return found if all(e in found for e in lacked) else None
 
     @cached_property
     def _linear_fit(self) -> FitResult:
@@ -303,7 +327,11 @@ class StudyResult:
             if not self._term_stands_in:
                 return HiddenOutcome.START_ADEQUATE
             return HiddenOutcome.TERM_SWAPPED if self.hit else HiddenOutcome.TERM_GROUP
-        return HiddenOutcome.HIT if self._found() else HiddenOutcome.MISS
+        if not self._found():
+            return HiddenOutcome.MISS
+        final = self.criticisms[-1].base.model
+        replaced = self.stand_ins and not any(t in final for t in self.stand_ins.values())
+        return HiddenOutcome.TERM_SWAPPED if replaced else HiddenOutcome.HIT
 
     def _outside_outcome(self) -> OutsideOutcome:
         if any(c.verdict == "explained" for c in self.criticisms):
@@ -363,6 +391,7 @@ class StudyResult:
                 for g in first.term_groups
             ],
             "term_group": self.term_group,
+            "stand_ins": self.stand_ins or None,
             "term_reduction": {c: self.term_reduction(c) for c in _STEP_RMSE}
             if self.term_group
             else None,

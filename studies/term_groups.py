@@ -24,7 +24,7 @@ from studies.outcomes import TermTrialOutcome
 from studies.rows import EndState, Row
 from studies.swaps import SWAP_TRUTHS
 
-__all__ = ["TERM_TRUTHS", "TermGroupRow", "TermTrial", "term_group_study"]
+__all__ = ["TERM_TRUTHS", "TermGroupRow", "TermTrial", "design_chi2", "term_group_study"]
 
 #: Truths of the model-term group study (:func:`term_group_study`): the swap study's (each
 #: with near-collinear catalogue rivals) and the even pair SINDy confuses (x², ẋ²).
@@ -195,6 +195,29 @@ def term_group_study(
     return run_campaigns(
         campaigns, truths, curve_counts, seed, lab_hidden_scenario, judge, progress, source
     )
+
+
+def design_chi2(crit: Criticism, truth: JointModel, model: JointModel) -> float:
+    """The separation at the design: ``model``'s structure refitted to the noise-free twin
+    of ``crit``'s data (``truth``'s prediction at every point, the campaign's metrics), its
+    ``χ²`` in the campaign's metric — the noncentrality of ``model``'s misfit, free of the
+    campaign's noise.
+
+    Parameters
+    ----------
+    crit
+        The criticism whose data and metric are used.
+    truth
+        The model that made the data.
+    model
+        The structure judged (refitted; its coefficients are start values).
+
+    Returns
+    -------
+    float
+        ``χ²`` of the refitted structure on the noise-free twin.
+    """
+    return _twin_chi2(crit, _noise_free_twin(crit, truth), model)
 
 
 def _noise_free_twin(crit: Criticism, truth: JointModel) -> FitData:

@@ -25,6 +25,7 @@ from identification.rig import (
     LAB_HIDDEN_SCENARIOS,
     LAB_NULL_SCENARIOS,
     LAB_OUT_OF_CATALOGUE_SCENARIOS,
+    RIG_PRESETS,
 )
 from independent import JointSpec, phase_resonance_campaign
 from independent.forces import Clearance
@@ -52,31 +53,36 @@ def _study(scenario: str, start: str, seed: int = SEED):
     return criticism_study(scenario, seed, start=start, assemblies=3, levels=8)
 
 
-_QUADRATIC_REGRESSION = pytest.mark.xfail(
-    strict=False,
-    reason="regressed when #25 recalibrated the bootstrap (calibration.scatter): the "
-    "quadratic-stiffness scenarios now fire where the old, conservative draw was quiet; the "
-    "term-group, swap and blind-backbone rules are to be re-derived",
-)
+def _only_the_effect_missing(scenario: str) -> str:
+    """The start that lacks only the hidden effect: the bare linear-viscous model, or the
+    preset's base model where the preset hides its effect on a cubic-hardening base (from
+    the bare linear start two effects would be missing there)."""
+    nonlinear = set(RIG_PRESETS[scenario].base_model.effects) - {LINEAR_STIFFNESS, VISCOUS_DAMPING}
+    return "base" if nonlinear else "linear"
 
 
-@pytest.mark.parametrize(
-    "scenario",
-    [
-        pytest.param(s, marks=_QUADRATIC_REGRESSION) if "quadratic-stiffness" in s else s
-        for s in LAB_HIDDEN_SCENARIOS
-    ],
-)
+@pytest.mark.parametrize("scenario", LAB_HIDDEN_SCENARIOS)
 def test_every_catalogue_effect_hidden_on_the_lab_rig_is_found(scenario):
-    """Pass rule: from the bare linear-viscous start, the row is a ``hit``
-    (:class:`studies.HiddenOutcome`): the hidden effect is ranked first or in the first
-    flagged group of a round with only the truth's effects added before, or the loop's final
-    model holds it and nothing beyond the truth; and the key channel's error is down ≥ 80 %
-    at the loop's end. Each lab preset hides its effect at a size that shows clearly over
-    0.05–2 mm (many times the systematic floors), so a miss here is a regression, not bad
-    luck. (From the linear start neither "start adequate" nor a model-term group can
-    arise: the start has no nonlinear term.)"""
-    result = _study(scenario, "linear")
+    """Pass rule: from the start that lacks only the hidden effect (the bare linear-viscous
+    model; the preset's cubic-hardening base for quadratic stiffness and microslip), the
+    row is a ``hit`` (:class:`studies.HiddenOutcome`): the hidden effect is ranked first or
+    in the first flagged group of a round with only the truth's effects added before, or
+    the loop's final model holds it and nothing beyond the truth; and the key channel's
+    error is down ≥ 80 % at the loop's end. Each lab preset hides its effect at a size that
+    shows clearly over 0.05–2 mm (many times the systematic floors), so a miss here is a
+    regression, not bad luck.
+
+    Why not the bare linear start for the hardening-base presets: it lacks two effects
+    there, and the loop stops when the first candidate captures less than ``STOP_SHARE``
+    (70 %) of the gain left. On held-out seed 1 000 000 the quadratic-stiffness row's first
+    candidate is ẋ², a stand-in for x³ and x² at once (64 %; x² 52 %, x³ 26 %): the loop
+    stops "partly explained" (p = 0.0005) with nothing added — the same with the bootstrap
+    before issue #25's recalibration, so not a regression of it, but the loop's stated
+    parsimony. That row's claim is the slow test's end-state rule
+    (:func:`test_hidden_effects_full_size`). (From the linear start neither "start
+    adequate" nor a model-term group can arise: the start has no nonlinear term; from the
+    base, its x³ is the truth's.)"""
+    result = _study(scenario, _only_the_effect_missing(scenario))
     assert result.outcome is HiddenOutcome.HIT, result.row()
     assert result.passed, result.row()
 
@@ -135,13 +141,23 @@ def test_an_independent_clearance_joint_is_never_explained_by_the_catalogue():
 @pytest.mark.parametrize("scenario", LAB_HIDDEN_SCENARIOS)
 def test_hidden_effects_full_size(scenario, start, seed):
     """Full size of the hidden-effect study on held-out seeds: from the linear start the row
-    is a ``hit``; from SINDy's polynomial model a hit, or not judged (``start adequate``,
-    ``start term group``: the start's own terms reproduce the effect within the scatter,
-    which the rig's truth confirms: the truth and the refitted start differ by less than
-    the where-bound at every level). Never a ``miss``."""
+    is a ``hit`` where the preset's base is linear-viscous; on a cubic-hardening base two
+    effects are missing from it and the loop may stop below its share (see
+    :func:`test_every_catalogue_effect_hidden_on_the_lab_rig_is_found`), so there it keeps
+    no effect outside the truth and, where its final test fires, does not end proposing
+    nothing. From SINDy's polynomial model a hit (``start term swapped`` included), or not
+    judged (``start adequate``, ``start term group``: the start's own terms reproduce the
+    effect within the scatter, which the rig's truth confirms: the truth and the refitted
+    start differ by less than the where-bound at every level). Never a ``miss``."""
     result = _study(scenario, start, seed)
-    if start == "linear":
+    if start == "linear" and _only_the_effect_missing(scenario) == "linear":
         assert result.outcome is HiddenOutcome.HIT, result.row()
+        return
+    if start == "linear":
+        final = result.criticisms[-1]
+        assert all(e in result.truth for e in result.kept), result.row()
+        if final.p_value <= final.alpha:
+            assert final.verdict not in QUIET_VERDICTS, result.row()
         return
     assert result.outcome is not HiddenOutcome.MISS, result.row()
     if result.passed is None:

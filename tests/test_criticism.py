@@ -14,6 +14,7 @@ from scipy.special import i1
 
 from identification.analytical.harmonic import backbone as harmonic_backbone
 from identification.criticism.adequacy import NEARBY_MODE, onset_only
+from identification.criticism.config import SEPARATION
 from identification.criticism.criticism import Step, criticize, run_rounds
 from identification.criticism.directions import base_jacobian
 from identification.criticism.plots import plot_history
@@ -29,6 +30,7 @@ from identification.rig import (
 )
 from pm_joint.analysis.posterior import criticize as criticize_posterior
 from studies import KEY_CHANNEL, StudyResult, criticism_study, simulated_campaign
+from studies.term_groups import design_chi2
 
 W0 = 2 * np.pi * 101.0
 K0 = W0**2
@@ -395,26 +397,40 @@ def test_microslip_reading_is_specific():
     assert not best.alternative and "nearby mode" not in best.reading, best.reading
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="regressed when #25 recalibrated the bootstrap (calibration.scatter): the "
-    "quadratic-stiffness scenarios now fire where the old, conservative draw was quiet; the "
-    "term-group, swap and blind-backbone rules are to be re-derived",
-)
 def test_quadratic_stiffness_needs_the_records():
-    """Backbones alone: the refitted cubic absorbs x² (nothing significant is left).
-    The records' second harmonic, which the extracted backbones keep, reveals it,
-    ranked above ẋ², which makes the same harmonic but with the wrong amplitude
-    dependence."""
+    """Backbones alone cannot name x²: its frequency shift is second order in k₂ and ∝ a²
+    to leading order, a cubic's (ω² ≈ k + ¾k₃a² − (5/6)k₂²a²/k), so the refitted cubic
+    takes most of it. What is left is the design's λ: the start's structure refitted to
+    the noise-free truth's backbones (independent of the campaign's noise) misses by
+    less than 2 × SEPARATION, while with the records' harmonics it misses by hundreds.
+    The recalibrated test may see that rest (issue #25: on this campaign p = 0.0015,
+    catalogue gain 6.8 against a threshold of 3.8; before the recalibration the
+    threshold was 24.1 for the same gain, p = 0.26, and the test claimed "not
+    significant" — a claim about the old draw, not the physics), but it cannot attribute
+    it: where it fires, the first proposal is in a group of springs the backbones cannot
+    separate, x² among them — never x² named alone, never an effect outside that group.
+    The records' second harmonic, which the extracted backbones keep, reveals x²,
+    proposed alone and ranked above ẋ², which makes the same harmonic but with the wrong
+    amplitude dependence. Seen over seeds of this campaign's recipe: tuning 0 fires (a
+    group of four springs holding x²), tuning 1 does not; held-out 1_000_000 and
+    1_000_001 do not (p 0.29, 0.37); with the records x² is first and ungrouped on all
+    four."""
     result = study("hidden-quadratic")
-    blind = criticize(result.start, result.measured.without_harmonics())
-    assert not blind.significant
+    blind_data = result.measured.without_harmonics()
+    blind = criticize(result.start, blind_data)
+    assert design_chi2(blind, result.truth, result.start) < 2 * SEPARATION
+    if blind.significant:
+        first = blind.missing()[0].effect
+        (group,) = [g.effects for g in blind.groups if first in g.effects]
+        assert "quadratic_stiffness" in group and len(group) >= 2, blind.summary()
     with_records = result.criticisms[0]
     ranked = [c.effect for c in with_records.candidates]
     assert ranked[0] == "quadratic_stiffness" == with_records.missing()[0].effect
     assert ranked.index("velocity_squared") > 0
     (failure,) = [f for f in with_records.where() if f.channel == "harmonic2"]
     assert failure.direction == "under-predicted" and failure.max_residual > 0.02
+    assert not any("quadratic_stiffness" in g.effects for g in with_records.groups)
+    assert design_chi2(with_records, result.truth, result.start) > 100 * SEPARATION
 
 
 @pytest.mark.slow

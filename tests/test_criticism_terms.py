@@ -10,10 +10,12 @@ import pytest
 
 from identification.criticism import criticism as engine
 from identification.criticism.criticism import criticize
+from identification.criticism.moves import Swap
 from identification.fitting.least_squares import fit_backbones
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS
 from studies import StudyResult, simulated_campaign
+from studies.term_groups import design_chi2
 
 W0 = 2 * np.pi * 101.0
 K0 = W0**2
@@ -33,20 +35,38 @@ def arch():
     return truth, measured, start, criticize(start, measured)
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="regressed when #25 recalibrated the bootstrap (calibration.scatter): the "
-    "quadratic-stiffness scenarios now fire where the old, conservative draw was quiet; the "
-    "term-group, swap and blind-backbone rules are to be re-derived",
-)
+@pytest.fixture(scope="module")
+def arch_loop(arch):
+    """The arch's start through the loop (3 rounds)."""
+    _, _, _, crit = arch
+    return engine.run_rounds(crit, 3)
+
+
 def test_a_start_term_standing_in_for_the_hidden_effect_is_grouped_with_it(arch):
-    """The group of the model's ẋ² names quadratic stiffness, the truth's term, in words
-    in the summary, the JSON and every round's report; it is a statement, not a proposal:
-    the start is adequate (nothing missing, nothing proposed). The group is small (the
-    term and at most three stand-ins), not the catalogue."""
+    """The group of the model's ẋ² names quadratic stiffness, the truth's term, in words in
+    the summary, the JSON and every round's report, preferred by more than SEPARATION.
+
+    What the data say beyond the group: ẋ² is not x². With x = a·cos θ, x² = a²(1 + cos
+    2θ)/2 and ẋ² = a²ω²(1 − cos 2θ)/2: a coefficient that matches x²'s 2nd harmonic
+    gives a static force of the opposite sign, and the frequency's change through that
+    offset differs, so the start lacks what x² does beyond ẋ². The design says how much:
+    the start's structure refitted to the noise-free truth misses it by a χ² λ far
+    beyond SEPARATION (independent of the campaign's noise). The linearised catalogue
+    statistic sees about half of what the refit does (12.5 against Δχ² 24.8 here), so
+    the calibrated decision (α = 1 %) fires on some such campaigns, not all (tuning
+    seeds 0–5: 5 of 6; held-out 1 000 000–1 000 001: 2 of 2, 3 000 000–3 000 005: 2 of
+    6; bench/results/criticism_arch.json). On this campaign it fires and x² is proposed
+    first. Before issue #25's recalibration the bootstrap drew noise the curves did not
+    show (catalogue threshold 23.9 against 9.3 now for the same gain, 12.5; p 0.077
+    against 0.0015), and the test claimed "nothing missing": that was the conservative
+    draw, not the physics."""
     truth, _, start, crit = arch
     assert start.coefficient("velocity_squared") > 0
-    assert crit.verdict == "nothing missing" and crit.missing() == [], crit.summary()
+    design = design_chi2(crit, truth, start)
+    assert design > 2 * engine.SEPARATION
+    assert crit.significant and crit.p_value <= crit.alpha, crit.summary()
+    assert crit.verdict == "explained"
+    assert crit.missing()[0].effect == "quadratic_stiffness"
     (group,) = [g for g in crit.term_groups if g.term == "velocity_squared"]
     assert "quadratic_stiffness" in group.alternatives
     assert len(group.effects) <= 1 + engine.MAX_TERM_REFITS
@@ -54,71 +74,84 @@ def test_a_start_term_standing_in_for_the_hidden_effect_is_grouped_with_it(arch)
     # the truth's x² in place of ẋ²: the refitted coefficient is the truth's sign and size
     fitted = group.fits["quadratic_stiffness"].model.coefficient("quadratic_stiffness")
     assert fitted == pytest.approx(truth.coefficient("quadratic_stiffness"), rel=0.3)
+    assert group.favoured == ("quadratic_stiffness",)  # Δχ² beyond SEPARATION in its place
     summary = crit.summary()
     assert "the model's ẋ² (velocity squared, +" in summary
     assert "quadratic stiffness x²" in summary and "a reading, not a proposal" in summary
-    assert group.favoured == ("quadratic_stiffness",)  # Δχ² beyond SEPARATION in its place
     report = json.loads(crit.to_json())
     (entry,) = [g for g in report["term_groups"] if g["term"] == "velocity_squared"]
     assert "quadratic_stiffness" in entry["effects"] and entry["text"] == group.text
     assert report["rounds"][-1]["term_groups"] == report["term_groups"]
-    assert report["ranking"] == [] and report["verdict"] == "nothing missing"
+    assert report["ranking"][0]["effect"] == "quadratic_stiffness"
+    assert report["verdict"] == "explained"
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="regressed when #25 recalibrated the bootstrap (calibration.scatter): the "
-    "quadratic-stiffness scenarios now fire where the old, conservative draw was quiet; the "
-    "term-group, swap and blind-backbone rules are to be re-derived",
-)
-def test_the_study_counts_a_grouped_start_term_as_an_in_group_hit(arch):
-    """A start-adequate row whose start term is grouped with the hidden effect is counted
-    apart ("start term group": not a hit, not judged); its key channel (the 2nd harmonic the arch
-    makes) is measured from the bare linear model to the start with x² in place of ẋ²."""
+def test_the_study_counts_a_replaced_stand_in_as_a_hit(arch, arch_loop):
+    """A row whose start holds a stand-in for the hidden effect (round 1's model-term group
+    pairs ẋ² with x²) and whose loop ends with x² in its place is a hit, "hit (start term
+    swapped)". Its key channel (the 2nd harmonic the arch makes) is measured from the start
+    without its stand-in: ẋ² had already taken most of the harmonic error down, so measured
+    from the start itself x² would be credited only with what ẋ² left. Independent check
+    of that baseline: the bare linear model predicts no harmonics at all, so its harmonic
+    RMSE is the measured size, more than twice the start's."""
     truth, measured, start, crit = arch
     row = StudyResult("lab-hidden-quadratic-stiffness", 0, "sindy", truth,
-                      ("quadratic_stiffness",), measured, [], start, [crit])  # fmt: skip
-    assert row.start_adequate and row.term_group == {"quadratic_stiffness": "velocity_squared"}
-    assert row.term_reduction("harmonics") >= 0.8 and row.passed is None
-    assert row.outcome == "start term group"
+                      ("quadratic_stiffness",), measured, [], start, arch_loop)  # fmt: skip
+    assert row.stand_ins == {"quadratic_stiffness": "velocity_squared"}
+    assert not row.start_adequate and row.term_group is None  # the decision fired
+    assert row.reduction("harmonics") >= 0.8
+    assert row.hit and row.passed is True
+    assert row.outcome == "hit (start term swapped)"
     table = row.row()
-    assert table["outcome"] == "start term group"
+    assert table["outcome"] == "hit (start term swapped)"
     assert table["term_groups"][0]["term"] == "velocity_squared"
-    # the bare linear model predicts no harmonics at all: its harmonic RMSE is the measured size
+    assert table["stand_ins"] == {"quadratic_stiffness": "velocity_squared"}
     linear = row._linear_fit
     assert linear.harmonic_rmse > 2 * crit.base.harmonic_rmse
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="regressed when #25 recalibrated the bootstrap (calibration.scatter): the "
-    "quadratic-stiffness scenarios now fire where the old, conservative draw was quiet; the "
-    "term-group, swap and blind-backbone rules are to be re-derived",
-)
-def test_the_loop_swaps_the_start_term_for_the_effect_the_data_prefer(arch):
-    """The loop's swap step for the model's own terms: the start's ẋ² is replaced by x²
-    (preferred by more than SEPARATION, admissible, no channel worse) as a round that adds
-    no effect; the refitted x² is the truth's within 30 %, the change is recorded on the
-    step and in the trials, and the study row is a hit by swap. A term the data cannot
-    tell from its stand-in (the exponential spring against SINDy's x³: within SEPARATION)
-    is not swapped: the loop stops with the start as it was."""
-    truth, measured, start, crit = arch
-    chain = engine.run_rounds(crit, 3)
-    last = chain[-1]
-    assert "velocity_squared" not in last.base.model
+def test_the_loop_replaces_the_start_term_by_the_effect_the_data_prefer(arch, arch_loop):
+    """The start's ẋ² stood in for x²: the loop ends on the truth's structure, x² within
+    30 % of the truth's coefficient and ẋ² gone. The model's own terms are corrected before
+    anything is added: the group prefers x² in ẋ²'s place by more than SEPARATION
+    (admissible, no channel worse), so the first round swaps them and adds no effect; then
+    nothing is missing. Judged beside ẋ², x²'s linearised column is small (the two are
+    nearly collinear there), and on some campaigns another spring's shape would be proposed
+    and added beside ẋ² (held-out seeds 1 000 000 and 1 000 001 under the add-first rule:
+    the exponential, Δχ² 23.7 and 16.1, the final model holding ẋ² and the exponential).
+
+    The other route, where the effect is added (the decision fires and no group prefers a
+    stand-in): the swap step after the addition tries the added effect's stand-ins for
+    removal, and with x² in, ẋ² adds nothing (its removal costs less than SEPARATION, far
+    below the calibrated threshold). Both routes end on the same model; the start's
+    criticism is left as it was."""
+    truth, _, _, crit = arch
+    last = arch_loop[-1]
+    assert set(last.base.model.effects) == set(truth.effects)
     assert last.base.model.coefficient("quadratic_stiffness") == pytest.approx(
         truth.coefficient("quadratic_stiffness"), rel=0.3
     )
-    assert last.history[-1].added == ("quadratic_stiffness",)
-    assert last.history[-1].removed == ("velocity_squared",)
-    (kept,) = [t for t in last.swaps if t.kept]
+    first_round = arch_loop[1].history[-1]
+    assert (first_round.added, first_round.removed) == (
+        ("quadratic_stiffness",),
+        ("velocity_squared",),
+    )
+    assert len(arch_loop[1].history) == 2  # the swap is round 1: nothing added before it
+    (kept,) = [t for c in arch_loop for t in c.swaps if t.kept]
     assert (kept.remove, kept.add) == ("velocity_squared", "quadratic_stiffness")
     assert kept.delta_chi2 > engine.SEPARATION
+    assert last.verdict in ("nothing missing", "drift") and not last.significant, last.summary()
     assert crit.swaps == [] and len(crit.history) == 1  # the start's criticism untouched
-    row = StudyResult("lab-hidden-quadratic-stiffness", 0, "sindy", truth,
-                      ("quadratic_stiffness",), measured, [], start, chain)  # fmt: skip
-    assert row.hit and row.outcome == "hit (start term swapped)"
-    assert row.added == ["quadratic_stiffness"] and row.kept == ["quadratic_stiffness"]
+    # the other route: x² added beside ẋ², then ẋ² removed as its stand-in
+    added = crit.add("quadratic_stiffness")
+    cleaned = Swap({}, "quadratic_stiffness", ("velocity_squared",)).apply(added)
+    (removal,) = [t for t in cleaned.swaps if t.kept]
+    assert (removal.remove, removal.add) == ("velocity_squared", None)
+    assert 0 <= -removal.delta_chi2 < engine.SEPARATION  # beside x², ẋ² adds nothing
+    assert set(cleaned.base.model.effects) == set(truth.effects)
+    assert cleaned.base.model.coefficient("quadratic_stiffness") == pytest.approx(
+        last.base.model.coefficient("quadratic_stiffness"), rel=0.05
+    )
 
 
 def test_a_term_no_catalogue_effect_mimics_gets_no_group():

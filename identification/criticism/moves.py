@@ -75,10 +75,17 @@ class Swap:
     significant); it is replaced when a replacement gains more than :data:`SEPARATION`
     (the data tell the two apart), is admissible and makes no channel worse beyond its
     noise. The best replacement wins over a removal; one change per round.
+
+    ``stand_ins``: terms of the model that a model-term group of the criticism before this
+    round's addition paired with the effect added (a SINDy start's ẋ² for x²). The data
+    could not do without them before; with the effect in, each is tried for removal by the
+    same rule as an earlier effect (no replacement: the effect just added is it), so a
+    stand-in the effect makes redundant does not stay beside it.
     """
 
     alternatives: Mapping[str, Sequence[str]]
     last: str
+    stand_ins: Sequence[str] = ()
 
     def apply(self, crit: Criticism) -> Criticism:
         """Every trial is recorded in ``swaps`` of the criticism returned: a copy of
@@ -90,14 +97,16 @@ class Swap:
         before = decision.channel_chi2(base)
         trials: list[SwapTrial] = []
         fits: list[FitResult] = []
-        for earlier in [e for e in self.alternatives if e in model and e != self.last]:
+        earlier_effects = [e for e in self.alternatives if e in model and e != self.last]
+        stand_ins = [t for t in self.stand_ins if t in model and t not in earlier_effects]
+        for earlier in [*earlier_effects, *stand_ins]:
             without = crit.refits.structure(model.without(earlier))
             cost = decision.chi2(without) - chi2
             why = "; ".join(fitted_problems(crit.data, without))
             trials.append(SwapTrial(earlier, None, -cost, False, why, REMOVE_IF.format(
                 threshold=decision.threshold)))  # fmt: skip
             fits.append(without)
-            for other in self.alternatives[earlier]:
+            for other in self.alternatives.get(earlier, ()):
                 if other in model:
                     continue
                 fit = crit.refits.structure(model.without(earlier).with_effect(other, 0.0))
@@ -180,11 +189,16 @@ def run_rounds(crit: Criticism, rounds: int, min_share: float = STOP_SHARE) -> l
     """Forward-backward stepwise selection from ``crit``: up to ``rounds`` effects added,
     and a loop that stops.
 
-    Each round adds the effect proposed first (:meth:`Criticism.missing`, :class:`Add`),
-    then runs the swap step (:class:`Swap`) over the effects added in earlier rounds.
-    When nothing is proposed, a term of the model that the data prefer a catalogue effect
-    in place of (:class:`SwapTerm`, e.g. a SINDy start's ẋ² for x²) is replaced first, as
-    a round of its own that adds no effect (at most ``rounds`` such swaps). The loop stops
+    A term of the model that the data prefer a catalogue effect in place of
+    (:class:`SwapTerm`, e.g. a SINDy start's ẋ² for x²) is replaced when nothing is
+    proposed, or unless the first proposal's addition gains more ``χ²`` than the swap by
+    :data:`SEPARATION` (within it the moves cannot be told apart, and the swap adds no
+    parameter): a round of its own that adds no effect (at most ``rounds`` such swaps).
+    Otherwise a round adds the effect proposed first (:meth:`Criticism.missing`,
+    :class:`Add`), then runs the swap step (:class:`Swap`) over the effects added in
+    earlier rounds and the model's terms that a model-term group paired with the effect
+    just added (its stand-ins: tried for removal, so that an effect found beside a term
+    that stood in for it does not leave the term behind). The loop stops
     (:class:`~identification.criticism.ending.Stop`) when the calibrated test does not
     fire; when it fires and nothing is proposed (no admissible candidate captures enough of
     the free-form reference's gain: the rest is not shaped like any candidate); when the
@@ -210,16 +224,26 @@ def run_rounds(crit: Criticism, rounds: int, min_share: float = STOP_SHARE) -> l
     while True:
         crit = chain[-1]
         proposed = crit.missing()
+        # The better move first: a term the data prefer a catalogue effect in place of
+        # (beyond SEPARATION) is replaced when nothing is proposed, or unless the first
+        # proposal's addition gains more than the swap by SEPARATION (within it the data
+        # cannot tell the two moves apart, and the swap adds no parameter). Added beside a
+        # stand-in, an effect is judged against it: a SINDy start's ẋ² beside which x²,
+        # linearised, looks small while another spring's shape is proposed.
+        swapped = SwapTerm().apply(crit) if term_swaps < rounds else None
+        if swapped is not None and proposed:
+            swap_gain = next(t.delta_chi2 for t in swapped.swaps if t.kept)
+            if (proposed[0].delta_chi2 or 0.0) - swap_gain > SEPARATION:
+                swapped = None
+        refused = problems_of(swapped) if swapped is not None else ()
+        if swapped is not None and not refused:
+            step = swapped.history[-1]
+            how = f"in place of the model's {', '.join(step.removed)}"
+            added += [Added(e, None, None, how) for e in step.added]
+            chain.append(swapped)
+            term_swaps += 1
+            continue
         if not proposed:
-            swapped = SwapTerm().apply(crit) if term_swaps < rounds else None
-            refused = problems_of(swapped) if swapped is not None else ()
-            if swapped is not None and not refused:
-                step = swapped.history[-1]
-                how = f"in place of the model's {', '.join(step.removed)}"
-                added += [Added(e, None, None, how) for e in step.added]
-                chain.append(swapped)
-                term_swaps += 1
-                continue
             if not crit.significant:
                 stop, why = Stop.NOTHING_MISSING, "the calibrated test does not fire"
             else:
@@ -248,7 +272,8 @@ def run_rounds(crit: Criticism, rounds: int, min_share: float = STOP_SHARE) -> l
             break
         effect = best.effect
         alternatives[effect] = crit.alternatives(effect)
-        following = Swap(alternatives, effect).apply(Add(effect).apply(crit))
+        stand_ins = tuple(g.term for g in crit.term_groups if effect in g.alternatives)
+        following = Swap(alternatives, effect, stand_ins).apply(Add(effect).apply(crit))
         refused = problems_of(following)
         if refused:
             stop = Stop.INADMISSIBLE

@@ -312,7 +312,7 @@ class TermGroup:
         )
         tell = (
             f"they fit better with {', '.join(self.favoured)} in its place (a reading, not a "
-            "proposal: when nothing is proposed, the loop's swap step replaces the term)"
+            "proposal: the loop's swap step replaces the term)"
             if self.favoured
             else "they cannot tell which it is (a reading of the model's terms, not a proposal)"
         )
