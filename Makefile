@@ -4,7 +4,10 @@ SHELL := /bin/bash
 VENV := .venv
 PY := $(VENV)/bin/python
 # Test processes (pytest-xdist): one per core; a file's tests stay in one process so its
-# fixtures are built once. `make test TEST_WORKERS=0` runs them in this process.
+# fixtures are built once. Files are handed out in collection order, which tests/conftest.py
+# starts with the files of tests marked heavy (xdist's own order, most tests first, left the
+# one-test end-to-end files for last, one worker running them alone).
+# `make test TEST_WORKERS=0` runs them in this process.
 TEST_WORKERS ?= auto
 # python3.12 may be a pyenv shim that refuses to run; fall back to known install places.
 PYTHON312 := $(shell for c in python3.12 $$HOME/.pyenv/versions/3.12*/bin/python3.12 /usr/local/bin/python3.12 /usr/bin/python3.12; do \
@@ -25,7 +28,7 @@ demo: $(VENV)/.installed
 test: $(VENV)/.installed
 	$(PY) -m ruff check .
 	$(PY) -m ruff format --check .
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 
 test-all: $(VENV)/.installed
 	$(PY) -m pytest -q -m "slow or not slow"

@@ -146,6 +146,7 @@ def posterior_sections(
     paragraphs = [
         # The verdict first: an unconverged run must not read as a result.
         f"Convergence verdict: {verdict.get('headline', 'not computed (an older report)')}",
+        *(f"Not computed from this posterior: {line}." for line in content.get("not_computed", [])),
         population.get("meaning", ""),
         f"Identifiability: {check['text']}." if check else "",
         _loo_text(loo),

@@ -20,12 +20,15 @@ import xarray as xr
 from identification.artifacts import atomic_write_text
 from identification.measurements.backbone import BackboneSet
 from pm_joint.analysis import (
+    UnmovedDraws,
     convergence_verdict,
     correlation_matrix,
+    group_dataset,
     level_pdfs,
     resolve_var_names,
     sampler_info,
     summarize,
+    unmoved_components,
 )
 from pm_joint.distributions import BackboneDensity
 from pm_joint.inference.models import HIERARCHICAL, POPULATION_MATCHING
@@ -145,14 +148,20 @@ def report(
         ``identifiability`` (population matching) or ``loo`` (hierarchical),
         ``level_pdfs`` (population matching; empty otherwise), ``var_names``,
         ``summary`` (records), ``correlation`` (``variables``, ``matrix``),
-        ``sampler`` and ``files`` (names in ``out``, ``report.json`` last).
+        ``sampler``, ``not_computed`` (one sentence per figure or number this
+        posterior cannot give, and why; each is also a warning) and ``files``
+        (names in ``out``, ``report.json`` last).
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     names = resolve_var_names(idata, var_names)
     verdict = convergence_verdict(idata)
     kind = idata.attrs.get("population_model", POPULATION_MATCHING)
-    files = [*plot_pairs(idata, names, out), *plot_trace_rank(idata, names, out)]
+    not_computed = _what_cannot_be_computed(idata, names)
+    unmoved = {c.split("[")[0] for c in unmoved_components(idata, names)}
+    paired = [n for n in names if n not in unmoved]
+    files = [*(plot_pairs(idata, paired, out) if paired else []),
+             *plot_trace_rank(idata, names, out)]  # fmt: skip
     corr = correlation_matrix(idata, names)
     files.append(save_png(plot_correlation(corr), out / "correlation.png"))
     content: dict[str, Any] = {
@@ -170,10 +179,15 @@ def report(
                 stacklevel=2,
             )
             density = BackboneDensity.fit(measured)
-        pdfs = level_pdfs(idata, density, name=name)
+        try:
+            pdfs = level_pdfs(idata, density, name=name)
+        except UnmovedDraws as exc:
+            pdfs = {}
+            not_computed.append(f"the PDFs at the amplitude levels: {exc}")
         backbones = plot_predictive_backbones(idata, density, measured, name=name)
         files.append(save_png(backbones, out / "predictive_backbones.png"))
-        files.append(save_png(plot_level_pdfs(pdfs), out / "level_pdfs.png"))
+        if pdfs:
+            files.append(save_png(plot_level_pdfs(pdfs), out / "level_pdfs.png"))
         content["level_pdfs"] = _level_pdfs_record(pdfs)
         stored = idata.attrs.get("identifiability")
         content["identifiability"] = json.loads(stored) if stored else None
@@ -191,8 +205,33 @@ def report(
             "summary": summarize(idata, names).reset_index(names="variable").to_dict("records"),
             "correlation": {"variables": list(corr.columns), "matrix": corr.values},
             "sampler": sampler_info(idata, sampler),
+            "not_computed": not_computed,
             "files": [p.name for p in files] + ["report.json"],
         }
     )
+    for line in not_computed:
+        warnings.warn(f"not computed from this posterior: {line}", UserWarning, stacklevel=2)
     atomic_write_text(out / "report.json", json.dumps(content, indent=2, allow_nan=False))
     return content
+
+
+def _what_cannot_be_computed(idata: xr.DataTree, names: Sequence[str]) -> list[str]:
+    """One plain sentence per figure or number that this posterior cannot give, and why.
+
+    A chain that never moved a parameter (a short run whose proposals were all
+    rejected) leaves no spread to bin, smooth or correlate; one chain has no
+    ranks to compare and no r̂.
+    """
+    posterior = group_dataset(idata, "posterior")
+    shape = f"{posterior.sizes['chain']} chain(s) × {posterior.sizes['draw']} draw(s)"
+    lines = []
+    unmoved = unmoved_components(idata, names)
+    if unmoved:
+        lines.append(
+            f"the pair plot, histogram and correlations of {', '.join(unmoved)}: every one of "
+            f"the {shape} holds one value (the chains never moved it), so there is no spread "
+            "to bin or correlate; sample longer or tune longer"
+        )
+    if posterior.sizes["chain"] < 2:
+        lines.append(f"r̂ and the rank plot: {shape}; both compare chains, run at least two")
+    return lines

@@ -23,3 +23,14 @@ def duffing_triplet() -> BackboneSet:
     return duffing_population(
         [0.99, 1.0, 1.01], [0.8e10, 1.0e10, 1.2e10], np.linspace(5e-5, 1.5e-3, 12)
     )
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The files holding a test marked ``heavy`` first, each file's tests in their order.
+
+    ``make test`` hands whole files to its workers in this order (``--dist loadfile
+    --no-loadscope-reorder``): the long files start at once, the many short ones fill in
+    behind them, and no worker is left running a long file alone at the end.
+    """
+    heavy = {item.path for item in items if item.get_closest_marker("heavy")}
+    items.sort(key=lambda item: item.path not in heavy)

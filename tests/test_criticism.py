@@ -637,6 +637,7 @@ def test_true_slip_is_identified_only_when_the_test_passes_its_damping_peak(onse
     assert (crit.verdict == "explained") == identified and nearby != identified, crit.summary()
 
 
+@pytest.mark.heavy
 def test_the_swap_step_replaces_a_stand_in_the_greedy_step_took():
     """Two effects missing from a linear start: van der Pol damping x²ẋ and a softening
     x|x| spring (the truth the curves are simulated from). Alone, a Jenkins slip element

@@ -247,3 +247,54 @@ def test_report_text_formats_its_numbers(tmp_path):
     assert "mean acceptance 0.26." in section.text
     page = _section(section)
     assert "1.235" in page and "1.2345" not in page
+
+
+def _short_trace(theta, density):
+    """One chain of the draws ``theta`` (n, 2), as ``pm-joint update --chains 1`` leaves it."""
+    predicted = frequencies(theta, density.amplitudes_m)
+    posterior = {n: theta[None, :, j] for j, n in enumerate(NAMES)}
+    posterior["backbone_predicted"] = predicted[None]
+    accepted = np.zeros((1, len(theta), 2))
+    return from_dict(
+        {"posterior": posterior, "sample_stats": {"accepted": accepted},
+         "observed_data": {"backbone": density.observations}},
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("moved", [True, False])
+def test_report_of_one_short_chain_says_what_it_cannot_compute(moved, tmp_path, measured, density):
+    """1 chain × 20 draws through ``pm-joint report``: r̂ and ranks need two chains; a chain
+    that never moved (every proposal rejected) has no spread for the pair plot, the
+    correlations and the PDFs per level. The report says so, and draws everything else."""
+    from pm_joint.cli import main
+    from pm_joint.html import missing_links
+
+    theta = population(20, np.random.default_rng(3))
+    if not moved:
+        theta[:] = theta[0]
+    posterior = save_posterior(_short_trace(theta, density), tmp_path / "p.nc", density=density)
+    measured.to_csv(tmp_path / "backbones.csv")
+    argv = ["report", str(tmp_path / "backbones.csv"), "--posterior", str(posterior)]
+    with pytest.warns(UserWarning, match="not computed from this posterior: ") as warned:
+        assert main([*argv, "--out", str(tmp_path / "out")]) == 0
+    content = json.loads((tmp_path / "out" / "posterior" / "report.json").read_text())
+    said = content["not_computed"]
+    assert said[-1 if moved else 1].startswith("r̂ and the rank plot: 1 chain(s) × 20 draw(s)")
+    assert "rank.png" not in content["files"]
+    figures = {"pairs_1.png", "level_pdfs.png"}
+    if moved:
+        assert len(said) == 1 and figures <= set(content["files"])
+        assert list(content["level_pdfs"]) == ["low", "mid", "high"]
+    else:
+        pair = "the pair plot, histogram and correlations of linear_stiffness, cubic_stiffness"
+        assert said[0].startswith(f"{pair}: every one of the 1 chain(s) × 20 draw(s) holds one")
+        assert said[2].startswith("the PDFs at the amplitude levels: low amplitude level: every")
+        assert len(said) == 3 and not figures & set(content["files"])
+        assert content["level_pdfs"] == {}
+    assert {"trace.png", "predictive_backbones.png", "correlation.png"} <= set(content["files"])
+    assert [str(w.message) for w in warned if "not computed" in str(w.message)] == [
+        f"not computed from this posterior: {line}" for line in said
+    ]
+    index = tmp_path / "out" / "index.html"
+    assert missing_links(index) == []
+    assert index.read_text().count("Not computed from this posterior: ") == len(said)

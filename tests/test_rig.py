@@ -141,6 +141,7 @@ def test_bad_rig_settings():
         _small_rig(pll_options={"max_hold_s": 3.0})
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("name", sorted(RIG_PRESETS))
 def test_presets_show_their_hidden_effects(name):
     preset = RIG_PRESETS[name]
@@ -159,6 +160,7 @@ def test_presets_show_their_hidden_effects(name):
         assert truth.damping_ratio.min() > 0.001 and truth.damping_ratio.max() < 0.015
 
 
+@pytest.mark.heavy
 def test_rig_round_trip_recovers_the_ground_truth(tmp_path):
     """Disk round trip of a trc-like campaign at 1e-4 m/s RMS vibrometer noise.
 

@@ -14,7 +14,13 @@ from pm_joint.analysis.convergence import (
     ConvergenceVerdict,
     convergence_verdict,
 )
-from pm_joint.analysis.levels import checked_predictions, level_pdfs, predicted_values, thin_rows
+from pm_joint.analysis.levels import (
+    UnmovedDraws,
+    checked_predictions,
+    level_pdfs,
+    predicted_values,
+    thin_rows,
+)
 from pm_joint.analysis.population import identifiability, loo, population_predictive
 from pm_joint.analysis.summaries import (
     CI_PROB,
@@ -25,6 +31,7 @@ from pm_joint.analysis.summaries import (
     resolve_var_names,
     sampler_info,
     summarize,
+    unmoved_components,
 )
 
 __all__ = [
@@ -33,6 +40,7 @@ __all__ = [
     "RHAT_MAX",
     "SAMPLE_DIMS",
     "ConvergenceVerdict",
+    "UnmovedDraws",
     "checked_predictions",
     "convergence_verdict",
     "correlation_matrix",
@@ -47,4 +55,5 @@ __all__ = [
     "sampler_info",
     "summarize",
     "thin_rows",
+    "unmoved_components",
 ]

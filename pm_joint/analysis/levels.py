@@ -17,7 +17,12 @@ import xarray as xr
 from pm_joint.analysis.summaries import SAMPLE_DIMS
 from pm_joint.distributions import CANDIDATES, BackboneDensity, distances, fit_best, level_marks
 
-__all__ = ["checked_predictions", "level_pdfs", "predicted_values", "thin_rows"]
+__all__ = ["UnmovedDraws", "checked_predictions", "level_pdfs", "predicted_values", "thin_rows"]
+
+
+class UnmovedDraws(ValueError):
+    """Every draw predicts one value at a level: the chains never moved, there is no
+    distribution of the sampled values to fit or compare."""
 
 
 def predicted_values(idata: xr.DataTree, name: str = "backbone") -> np.ndarray:
@@ -128,7 +133,7 @@ def level_pdfs(
         column = sampled[:, i]
         finite = column[np.isfinite(column)]
         if finite.size and np.ptp(finite) == 0:
-            raise ValueError(
+            raise UnmovedDraws(
                 f"{level} amplitude level: every posterior draw predicts the same frequency "
                 f"({finite[0]:.6g} Hz): the chains did not move; tune longer or narrow the priors"
             )

@@ -26,6 +26,7 @@ __all__ = [
     "resolve_var_names",
     "sampler_info",
     "summarize",
+    "unmoved_components",
 ]
 
 SAMPLE_DIMS = ("chain", "draw")
@@ -89,6 +90,14 @@ def _draws_table(idata: xr.DataTree, var_names: Sequence[str]) -> pd.DataFrame:
         for j, label in enumerate(flat["__component__"].values):
             columns[f"{name}[{', '.join(map(str, label))}]"] = flat.values[:, j]
     return pd.DataFrame(columns)
+
+
+def unmoved_components(idata: xr.DataTree, var_names: Sequence[str] | None = None) -> list[str]:
+    """Components (labelled like :func:`correlation_matrix`'s columns) whose draws hold fewer
+    than two distinct finite values: the chains never moved them, so they have no spread to
+    bin, smooth or correlate."""
+    table = _draws_table(idata, resolve_var_names(idata, var_names))
+    return [c for c in table.columns if table[c][np.isfinite(table[c])].nunique() < 2]
 
 
 def correlation_matrix(idata: xr.DataTree, var_names: Sequence[str] | None = None) -> pd.DataFrame:
