@@ -47,6 +47,7 @@ from identification.measurements.signals import Kinematics, harmonic_band_hz
 from identification.measurements.trc_layout import CENTRE_POINT
 from identification.sindy import padding
 from identification.sindy.kinematics import DEFAULT_EDGE_PERIODS, sensor_kinematics
+from identification.sindy.modal_derivatives import unbiased_kinematics
 
 __all__ = ["ModalKinematics", "ModalSettings", "decay_onset", "modal_kinematics"]
 
@@ -213,9 +214,13 @@ def modal_kinematics(
         band = harmonic_band_hz(frequencies, rates[0], settings.n_harmonics)
     out = []
     for c in raw:
+        # The derived channels without the difference rules' frequency bias
+        # (:mod:`.modal_derivatives`): the modal equations carry it into a phase drift.
         modes = tuple(
-            sensor_kinematics(c.t, c.values[:, m], c.quantity, base_velocity=c.base_velocity,
-                              band_hz=band, edge_periods=settings.edge_periods)
+            unbiased_kinematics(
+                sensor_kinematics(c.t, c.values[:, m], c.quantity, base_velocity=c.base_velocity,
+                                  band_hz=band, edge_periods=settings.edge_periods),
+                c.quantity)
             for m in range(n_modes)
         )  # fmt: skip
         out.append(ModalKinematics(c.label, modes, c.frequencies_hz, c.joint_shape))
