@@ -23,7 +23,10 @@ at rest, and the hit itself is a force the equations do not carry.
 All coordinates of all records then pass one common band-pass (the harmonics
 ``1..n_harmonics`` of the lowest to the highest mode,
 :func:`~identification.measurements.signals.harmonic_band_hz`), so that the library's
-columns can pass the same filter (one filter on both sides, :mod:`.library`).
+columns can pass the same filter (one filter on both sides, :mod:`.library`). The derived
+channels (velocity, acceleration of a displacement; displacement, acceleration of a velocity)
+then have the difference rules' gains divided out (:mod:`.modal_derivatives`), so that the
+identified frequencies carry no ``(ωh)²`` bias; the one-mode path keeps the plain rules.
 
 The **joint coordinate** ``q = Σ_m φ_m x_m`` is read at one sensor, the joint sensor
 (default the record's response sensor: the TRC centre point, the first ``--response``
