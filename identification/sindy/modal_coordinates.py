@@ -23,7 +23,10 @@ at rest, and the hit itself is a force the equations do not carry.
 All coordinates of all records then pass one common band-pass (the harmonics
 ``1..n_harmonics`` of the lowest to the highest mode,
 :func:`~identification.measurements.signals.harmonic_band_hz`), so that the library's
-columns can pass the same filter (one filter on both sides, :mod:`.library`).
+columns can pass the same filter (one filter on both sides, :mod:`.library`). The derived
+channels (velocity, acceleration of a displacement; displacement, acceleration of a velocity)
+then have the difference rules' gains divided out (:mod:`.modal_derivatives`), so that the
+identified frequencies carry no ``(ωh)²`` bias; the one-mode path keeps the plain rules.
 
 The **joint coordinate** ``q = Σ_m φ_m x_m`` is read at one sensor, the joint sensor
 (default the record's response sensor: the TRC centre point, the first ``--response``
@@ -47,6 +50,7 @@ from identification.measurements.signals import Kinematics, harmonic_band_hz
 from identification.measurements.trc_layout import CENTRE_POINT
 from identification.sindy import padding
 from identification.sindy.kinematics import DEFAULT_EDGE_PERIODS, sensor_kinematics
+from identification.sindy.modal_derivatives import unbiased_kinematics
 
 __all__ = ["ModalKinematics", "ModalSettings", "decay_onset", "modal_kinematics"]
 
@@ -213,9 +217,13 @@ def modal_kinematics(
         band = harmonic_band_hz(frequencies, rates[0], settings.n_harmonics)
     out = []
     for c in raw:
+        # The derived channels without the difference rules' frequency bias
+        # (:mod:`.modal_derivatives`): the modal equations carry it into a phase drift.
         modes = tuple(
-            sensor_kinematics(c.t, c.values[:, m], c.quantity, base_velocity=c.base_velocity,
-                              band_hz=band, edge_periods=settings.edge_periods)
+            unbiased_kinematics(
+                sensor_kinematics(c.t, c.values[:, m], c.quantity, base_velocity=c.base_velocity,
+                                  band_hz=band, edge_periods=settings.edge_periods),
+                c.quantity)
             for m in range(n_modes)
         )  # fmt: skip
         out.append(ModalKinematics(c.label, modes, c.frequencies_hz, c.joint_shape))
