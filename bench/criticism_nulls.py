@@ -8,20 +8,29 @@ from the records), each criticised with its truth's structure, once with the sys
 floors (:data:`identification.fitting.data.NOISE_FLOOR`) and once without
 (:data:`studies.nulls.NO_FLOOR`). Under the null a calibrated p-value is uniform.
 
-Printed, for each floor setting: the Kolmogorov–Smirnov test of uniformity (two-sided),
-and the share of p-values ≤ α for α ∈ {0.01, 0.05, 0.1} with its two-sided 95 %
-Clopper–Pearson interval, over all campaigns and per preset; with the floors, the mean
-effective level the criticisms print (``Calibration.effective_level``, at their
-α = 1 %) beside the measured share ≤ 1 %. Targets (issue 25): uniformity not rejected
-at 1 %, or the printed effective level within the measured share's bounds.
-Baselines: the same campaigns with the bootstrap drawn from the analysis' estimate of the
-covariance (the calibration before the bootstrap drew curves like the measured ones).
+Printed, for each floor setting, over all campaigns and per preset: the Kolmogorov–Smirnov
+test of uniformity (two-sided), and the share of p-values ≤ α for α ∈ {0.01, 0.05, 0.1}
+with its two-sided 95 % Clopper–Pearson interval; with the floors, the mean effective level
+the criticisms print (``Calibration.effective_level``, at their α = 1 %) beside the
+measured share ≤ 1 %. Baselines: the same campaigns with the bootstrap drawn from the
+analysis' estimate of the covariance (the calibration before the bootstrap drew curves like
+the measured ones).
 
-Seeds: campaign ``k`` is seeded ``[seed, k]``; the default ``--seed`` is the held-out block
-(1_000_000). ``--cache DIR`` keeps the simulated campaigns (the simulation dominates),
-``--rows FILE`` appends each campaign's row and reuses rows already there, ``--part i/m``
-runs the campaigns ``k ≡ i (mod m)`` only (pieces in parallel; a run without ``--part``
-reads every row and prints the figures).
+**Outcome rule** (issue 25, fixed before the held-out run, over all campaigns, every preset
+included): floors off — uniformity not rejected (KS, 1 %); floors on — uniformity not
+rejected, or the printed effective level inside the measured share's two-sided 95 %
+Clopper–Pearson bounds. The per-preset figures are reported beside it, not judged (about
+40 campaigns each).
+
+**Seeds.** Campaign ``k`` is seeded ``[seed, k]``; the default ``--seed`` is held-out block 4
+(4_000_000, :data:`SEED`). Block 1 (1_000_000) was read before the hold fits corrected the
+power balance of unsettled holds (``extraction.stored_energy_damping``, the lab-lock fix),
+so the report moved; the correction was chosen on tuning seeds (block 0).
+``--cache DIR`` keeps the simulated campaigns (the simulation dominates), ``--rows FILE``
+appends each campaign's row and reuses rows already there, ``--part i/m`` runs the campaigns
+``k ≡ i (mod m)`` only (pieces in parallel; a run without ``--part`` reads every row and
+prints the figures), ``--until HH:MM`` (UTC) starts no campaign after that time and
+summarises the rows done (the presets taken in turn, so a stop leaves them balanced within one).
 
 Run: ``nice -n 10 .venv/bin/python bench/criticism_nulls.py --campaigns 200``. Writes
 ``bench/results/criticism_nulls.json`` and ``.txt``; ends with one JSON line.
@@ -29,6 +38,7 @@ Run: ``nice -n 10 .venv/bin/python bench/criticism_nulls.py --campaigns 200``. W
 
 import argparse
 import dataclasses
+import datetime
 import json
 import time
 from pathlib import Path
@@ -41,17 +51,14 @@ from identification.criticism.criticism import ALPHA, N_BOOTSTRAP, criticize
 from identification.rig import RIG_PRESETS
 from studies import clopper_pearson
 from studies.nulls import LAB_DRIFT_TRUTHS, LAB_NULL_TRUTHS, NO_FLOOR, rig_campaign
-from studies.seeds import HELD_OUT_SEED
+from studies.seeds import held_out_block
 
 LEVELS = (0.01, 0.05, 0.1)
 KS_LEVEL = 0.01
 RESULTS = Path(__file__).parent / "results"
 FLOORS = {"floors": None, "no_floors": NO_FLOOR}
-#: Presets whose artefact is a systematic error beyond the stated floors, reported apart
-#: (set on tuning seeds before the held-out run): the imperfect lock's short holds end
-#: before the lowest level has settled, a damping error there several times the damping
-#: floor that looks like friction.
-BEYOND_FLOORS = ("lock",)
+#: The held-out block of the reported run (see the module notes for why not block 1).
+SEED = held_out_block(4)
 
 
 def _baseline_p(crit) -> float:
@@ -107,10 +114,17 @@ def _figures(p: np.ndarray) -> dict:
             "median_p": float(np.median(p)), "below": _shares(p)}  # fmt: skip
 
 
-def _subset(rows: list[dict], label: str) -> tuple[dict, dict, list[str]]:
-    """Figures and baselines of some rows, with their text lines."""
+def _share_text(below: dict) -> str:
+    return ", ".join(
+        f"≤ {a}: {v['count']}/{v['runs']} ({100 * v['ci95_low']:.1f}–{100 * v['ci95_high']:.1f} %)"
+        for a, v in below.items()
+    )
+
+
+def summarise(rows: list[dict]) -> tuple[dict, list[str]]:
+    """Figures and baselines of the rows, with their text lines."""
     last = max(r["campaign"] for r in rows)
-    lines = [f"{label}: {len(rows)} lab-rig null campaigns (seed {rows[0]['seed'][0]}, "
+    lines = [f"{len(rows)} lab-rig null campaigns (seed {rows[0]['seed'][0]}, "
              f"k ≤ {last}); p-values of the calibrated decision"]  # fmt: skip
     figures, baselines = {}, {}
     for name in FLOORS:
@@ -122,18 +136,11 @@ def _subset(rows: list[dict], label: str) -> tuple[dict, dict, list[str]]:
             for t in dict.fromkeys(r["truth"] for r in rows)
         }
         for prefix, f in (("", figures[name]), ("baseline ", baselines[name])):
-            shares = ", ".join(
-                f"≤ {a}: {v['count']}/{v['runs']} ({100 * v['ci95_low']:.1f}–"
-                f"{100 * v['ci95_high']:.1f} %)"
-                for a, v in f["below"].items()
-            )
             lines.append(f"{prefix}{name}: KS p {f['ks_p']:.3g}, median p {f['median_p']:.2f}; "
-                         + shares)  # fmt: skip
+                         + _share_text(f["below"]))  # fmt: skip
         for t, f in figures[name]["by_truth"].items():
-            v = f["below"]
-            lines.append(f"  {name} {t}: KS p {f['ks_p']:.3g}, median {f['median_p']:.2f}, "
-                         f"≤ 0.01 {v['0.01']['count']}, ≤ 0.1 {v['0.1']['count']} of "
-                         f"{v['0.1']['runs']}")  # fmt: skip
+            lines.append(f"  {name} {t}: KS p {f['ks_p']:.3g}, median {f['median_p']:.2f}; "
+                         + _share_text(f["below"]))  # fmt: skip
     printed = float(np.mean([r["floors"]["effective_level"] for r in rows]))
     at_alpha = figures["floors"]["below"][str(ALPHA)]
     figures["floors"]["printed_effective_level"] = printed
@@ -145,30 +152,27 @@ def _subset(rows: list[dict], label: str) -> tuple[dict, dict, list[str]]:
         f"{100 * printed:.2g} %, measured {at_alpha['count']}/{at_alpha['runs']} "
         f"({100 * at_alpha['ci95_low']:.1f}–{100 * at_alpha['ci95_high']:.1f} %)"
     )
-    return figures, baselines, lines
-
-
-def summarise(rows: list[dict]) -> tuple[dict, list[str]]:
-    """Figures over every campaign, and over those whose artefacts the floors cover."""
-    figures, baselines, lines = _subset(rows, "all presets")
-    within = [r for r in rows if r["truth"] not in BEYOND_FLOORS]
-    if within and len(within) < len(rows):
-        inside, inside_baselines, more = _subset(within, "artefacts within the floors")
-        figures["within_floors"], baselines["within_floors"] = inside, inside_baselines
-        lines += more
     return {"figures": figures, "baselines": baselines}, lines
+
+
+def _past(until: str) -> bool:
+    """Whether the UTC clock is past ``HH:MM`` today."""
+    now = datetime.datetime.now(datetime.UTC)
+    hours, minutes = (int(x) for x in until.split(":"))
+    return (now.hour, now.minute) >= (hours, minutes)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--campaigns", type=int, default=200)
-    parser.add_argument("--seed", type=int, default=HELD_OUT_SEED)
+    parser.add_argument("--seed", type=int, default=SEED)
     parser.add_argument("--truths", default=",".join(LAB_NULL_TRUTHS),
                         help="keys of LAB_NULL_TRUTHS / LAB_DRIFT_TRUTHS, in turn")  # fmt: skip
     parser.add_argument("--n-bootstrap", type=int, default=N_BOOTSTRAP)
     parser.add_argument("--cache", type=Path, help="folder keeping the simulated campaigns")
     parser.add_argument("--rows", type=Path, help="JSON-lines file of rows (appended, reused)")
     parser.add_argument("--part", help="i/m: run only the campaigns k ≡ i (mod m)")
+    parser.add_argument("--until", help="HH:MM (UTC): start no campaign after it")
     parser.add_argument("--out", type=Path, default=RESULTS / "criticism_nulls.json")
     args = parser.parse_args()
     truths = args.truths.split(",")
@@ -183,6 +187,8 @@ def main() -> None:
     for k in range(part, args.campaigns, parts):
         if k in done:
             continue
+        if args.until is not None and _past(args.until):
+            break
         row = campaign_row(k, truths[k % len(truths)], args.seed, args.cache, args.n_bootstrap)
         done[k] = row
         print(json.dumps(row), flush=True)
@@ -211,16 +217,9 @@ def main() -> None:
             "within the measured share's two-sided 95 % Clopper-Pearson bounds",
         },
         "meets_target": {
-            subset: {
-                "no_floors": f["no_floors"]["uniform_not_rejected"],
-                "floors": f["floors"]["uniform_not_rejected"]
-                or f["floors"]["printed_inside_measured"],
-            }
-            for subset, f in (
-                ("all", result["figures"]),
-                ("within_floors", result["figures"].get("within_floors")),
-            )
-            if f is not None
+            "no_floors": result["figures"]["no_floors"]["uniform_not_rejected"],
+            "floors": result["figures"]["floors"]["uniform_not_rejected"]
+            or result["figures"]["floors"]["printed_inside_measured"],
         },
         "seconds": round(time.perf_counter() - began, 1),
     }

@@ -127,13 +127,13 @@ def test_null_p_values_are_uniform(n_curves):
 
 @pytest.mark.slow
 def test_rig_null_p_values_are_uniform_without_floors():
-    """32 lab-rig null campaigns (3 assemblies, 8 levels, tuning seeds; the artefact presets
-    whose errors the floors cover, in turn: the imperfect lock's unsettled lowest hold is a
-    damping error beyond them, reported apart by ``bench/criticism_nulls.py``), floors off:
-    KS (two-sided) does not reject uniformity at 1 %."""
+    """32 lab-rig null campaigns (3 assemblies, 8 levels, tuning seeds; every artefact
+    preset in turn, the imperfect lock's unsettled holds included since the hold fits
+    correct their power balance for the stored energy), floors off: KS (two-sided) does not
+    reject uniformity at 1 %."""
     from studies.nulls import NO_FLOOR, null_study
 
-    truths = ("pure", "distorted", "ripple", "dropouts")
+    truths = ("pure", "distorted", "ripple", "lock", "dropouts")
     rows = null_study(
         32, source="rig", truths=truths, seed=0, noise_floor=NO_FLOOR, n_bootstrap=500
     )

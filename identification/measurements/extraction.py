@@ -31,7 +31,12 @@ samples dropped as spikes, and whether the amplitude had settled (its relative
 change over the window within
 :data:`~identification.measurements.hold_fit.SETTLE_TOLERANCE`, or not
 significantly beyond it). Points off phase resonance (:data:`PHASE_ERROR_TOLERANCE_DEG`) or not
-settled are kept and flagged; :func:`extraction_summary` counts them.
+settled are kept and flagged; :func:`extraction_summary` counts them. The power balance of a
+hold that had not settled is corrected for the energy the growing (or decaying) response
+stores over the window (:func:`stored_energy_damping`) beyond the settling tolerance:
+without it, a hold that ends inside its step's transient reads the stored power as damping
+(a slow lock's lowest level, which starts from rest, reads like friction). Settled points
+are not touched; every point is left with at most the tolerance's bias.
 """
 
 from __future__ import annotations
@@ -72,6 +77,7 @@ __all__ = [
     "hold_point",
     "hold_points",
     "record_holds",
+    "stored_energy_damping",
 ]
 
 #: Largest relative difference between the frequency channel and the base motion's own
@@ -195,6 +201,12 @@ def hold_point(
     # The response signal's amplitude is |X|·ω^order: the displacement's changes by
     # the frequency's change `order` times less.
     change = fit.amplitude_change - order * fit.frequency_change
+    settled = is_settled(change, fit.amplitude_change_standard_error)
+    if not settled and test == "phase-resonance":
+        # The change beyond the settling tolerance only: continuous where a hold crosses
+        # it, and a settled hold keeps its reading (and its bias, at most the tolerance's).
+        excess = change - np.clip(change, -SETTLE_TOLERANCE, SETTLE_TOLERANCE)
+        damping -= stored_energy_damping(excess, fit.duration_s, omega)
     return HoldPoint(
         amplitude_m=abs(relative_velocity) / omega,
         frequency_hz=frequency / (2 * np.pi),
@@ -207,10 +219,24 @@ def hold_point(
         time_s=fit.time_s,
         dropped_samples=fit.dropped_samples,
         amplitude_change=change,
-        settled=is_settled(change, fit.amplitude_change_standard_error),
+        settled=settled,
         reference_offset_hz=fit.reference_offset_hz,
         mean_offset_m=fit.response_mean if response_quantity == "displacement" else math.nan,
     )
+
+
+def stored_energy_damping(amplitude_change: float, duration_s: float, omega: float) -> float:
+    """The damping ratio a power balance reads from a response still growing: ``ȧ / (a ω)``.
+
+    The power supplied over a window feeds the damping and the energy stored in the
+    motion, ``E ∝ a²``: ``P = 2ζω E + Ė``, so a power balance that takes ``P`` for the
+    damping alone reads ``ζ + Ė / (2ωE) = ζ + ȧ / (a ω)`` (first order in the window's
+    relative change ``amplitude_change`` over ``duration_s``; negative while the response
+    decays). A hold that ends before the transient of its step has died out (a slow lock,
+    a short hold) reads high, most at the lowest level, which starts from rest: a damping
+    falling with amplitude, the signature of friction.
+    """
+    return amplitude_change / duration_s / omega
 
 
 def _velocities(
