@@ -39,6 +39,9 @@ from studies import (
     held_out_seeds,
 )
 
+#: Among the longest files of ``make test``: handed out first (tests/conftest.py).
+pytestmark = pytest.mark.heavy
+
 #: The one held-out seed of the CI studies: the first of the first held-out block.
 SEED = HELD_OUT_SEED
 #: The full size's seeds (slow): five held-out seeds after the CI one.

@@ -40,6 +40,9 @@ from independent.decays import ModalSystem, PotentialTerm, modal_free_decay
 from independent.forces import CubicDamping, CubicStiffness
 from pm_joint.cli import main as cli
 
+#: Among the longest files of ``make test``: handed out first (tests/conftest.py).
+pytestmark = pytest.mark.heavy
+
 FREQUENCY_RTOL, DAMPING_RTOL = 5e-4, 0.02
 F_HZ, ZETA = (100.0, 196.0), (0.003, 0.003)
 JOINT = (1.0, 0.8)

@@ -44,6 +44,9 @@ from independent.modal_pll import LabNoise, LoopSettings, pll_record, write_trc_
 from independent.modal_resonance import ShakerDistortion, modal_phase_resonance
 from pm_joint.cli import main as cli
 
+#: Among the longest files of ``make test``: handed out first (tests/conftest.py).
+pytestmark = pytest.mark.heavy
+
 FREQUENCY_RTOL, DAMPING_RTOL, PARTICIPATION_RTOL = 5e-4, 0.02, 0.05
 F_HZ, ZETA = (100.0, 196.0), (0.004, 0.004)
 JOINT = (1.0, 0.8)
