@@ -32,16 +32,30 @@ linearised statistic and its own calibrated bootstrap.
   both turn in size and phase, which no catalogue term (whose even harmonics follow the
   first mode's own operator) does.
 
+* *seen at the response sensor* — a mode the sensor sees (shape ``s`` there) and the base
+  drives (participation ``Γ₂``) adds ``c/D₂(ω)``, ``c = sΓ₂``, to the measured receptance
+  ``1/K₁``. The lock on the measured phase then moves ``ω²`` by ``Re(c I²/D₂)`` and the
+  power-balance damping ratio by ``Im(c I²/D₂)/(2ω²)``, ``I = 2ζ(a)ω(a)²`` the first
+  mode's damping stiffness: ``Δ = I²/D₂(ω)`` per unit ``c`` (either sign,
+  :data:`SENSOR`), which follows the damping as it changes with amplitude (a constant
+  shift is the linear stiffness's).
+
 ``ω₂ = r · ω₁`` over :data:`JOINT_RATIOS` and :data:`COUPLING_RATIOS` (``ω₁`` the base
 model's frequency at the lowest level) and ``ζ₂`` the base model's damping ratio there (a
-mode damped like the one measured: the data of one mode cannot say more).
+mode damped like the one measured: the data of one mode cannot say more). A mode the
+backbone would cross — ``ω₂`` (``ω₂/2`` at 1:2) within the backbone's frequency range
+widened by :data:`CROSSING_BANDWIDTHS` half-power bandwidths — gets no column: there the
+linearisation is singular, and a one-mode backbone could not pass it.
 
 **The rule** (fixed before the study, ``docs/criticism.md``, "A missing mode"). A second
 mode is named when
 
 1. the calibrated decision fires (:attr:`Decision.significant`: the only test that says
    something is missing);
-2. the best second-mode column's ``χ²`` gain exceeds its own threshold, the ``1 − α'``
+2. the column whose frequency adds most — the largest *prominence*, its gain less the
+   larger of its family's two grid-end gains (where the mode is far and the column a
+   catalogue-like shape of no frequency) — locates a mode (prominence ≥
+   :data:`~.config.SEPARATION`), and its ``χ²`` gain exceeds its own threshold, the ``1 − α'``
    quantile of the largest second-mode gain over the decision's bootstrap campaigns
    (the same campaigns, ``α'`` the level each of the decision's two tests holds:
    :attr:`Calibration.level_each`); and
@@ -77,9 +91,11 @@ if TYPE_CHECKING:
 __all__ = [
     "COUPLING",
     "COUPLING_RATIOS",
+    "CROSSING_BANDWIDTHS",
     "HARMONIC",
     "JOINT",
     "JOINT_RATIOS",
+    "SENSOR",
     "ModeColumns",
     "SecondMode",
     "added_stiffness",
@@ -95,12 +111,17 @@ JOINT = "joint"
 COUPLING = "coupling"
 #: The same mode as the second harmonic of the response sees it.
 HARMONIC = "harmonic"
+#: A mode near the first that the response sensor sees beside it.
+SENSOR = "sensor"
 #: Second-mode frequencies over the first's tried through the joint (0.5 % steps).
 JOINT_RATIOS = tuple(np.round(np.arange(0.8, 1.25 + 1e-9, 0.005), 4))
 #: Second-mode frequencies over the first's tried through a quadratic coupling.
 COUPLING_RATIOS = tuple(np.round(np.arange(1.6, 2.4 + 1e-9, 0.005), 4))
 #: Whether a column's coefficient (``b²``, ``κ²``; ``κφ₂``) has one physical sign.
-_ONE_SIDED = {JOINT: True, COUPLING: True, HARMONIC: False}
+_ONE_SIDED = {JOINT: True, COUPLING: True, HARMONIC: False, SENSOR: False}
+#: Half-power bandwidths (2ζ of the frequency) by which the backbone's frequency range is
+#: widened to find the modes it would cross.
+CROSSING_BANDWIDTHS = 2.0
 #: Amplitude (relative to the lowest level) at which the joint counts as at rest.
 _AT_REST = 1e-3
 
@@ -129,6 +150,8 @@ class ModeColumns:
     joint_force, joint_slope
         ``(n_levels,)`` ``N(a)``, the joint's complex stiffness beyond rest, and
         ``a N′(a)``.
+    damping_stiffness
+        ``(n_levels,)`` ``I = 2ζ(a)ω(a)²`` of the base model's backbone.
     """
 
     tables: np.ndarray
@@ -142,6 +165,7 @@ class ModeColumns:
     levels_m: np.ndarray
     joint_force: np.ndarray
     joint_slope: np.ndarray
+    damping_stiffness: np.ndarray
 
     @property
     def directions(self) -> list[Direction]:
@@ -158,7 +182,7 @@ class ModeColumns:
 
     def harmonic(self, index: int) -> int:
         """The harmonic of the first mode's frequency column ``index``'s mode moves at."""
-        return 1 if self.mechanisms[index] == JOINT else 2
+        return 2 if self.mechanisms[index] in (COUPLING, HARMONIC) else 1
 
     def linear_operator(self, index: int, harmonic: int) -> np.ndarray:
         """``D₂(hω)`` of column ``index`` at the levels."""
@@ -196,6 +220,7 @@ def added_stiffness(
     joint_force: np.ndarray | None = None,
     joint_slope: np.ndarray | None = None,
     at_rest: np.ndarray | None = None,
+    damping_stiffness: np.ndarray | None = None,
 ) -> np.ndarray:
     """``Δ``, the first mode's added complex dynamic stiffness per unit coefficient, at its
     own amplitude ``a``.
@@ -203,7 +228,8 @@ def added_stiffness(
     ``−[N² / D₂(ω) + a N′ Re(N / D₂(ω))]`` per unit ``b²`` through the joint
     (``joint_force`` ``N(a)``, ``joint_slope`` ``a N′(a)``, ``operator`` ``D₂(ω)``);
     ``−a² [1 / (2 D₂(2ω)) + 1/D₂(0)]`` per unit ``κ²`` through a quadratic coupling
-    (``operator`` ``D₂(2ω)``, ``at_rest`` ``D₂(0) = ω₂²``: the second mode's mean). The
+    (``operator`` ``D₂(2ω)``, ``at_rest`` ``D₂(0) = ω₂²``: the second mode's mean);
+    ``I² / D₂(ω)`` per unit ``sΓ₂`` seen at the sensor (``damping_stiffness`` ``I``). The
     phase-resonant frequency moves by ``Re Δ / (2ω)`` (rad/s) and the damping ratio by
     ``Im Δ / (2ω²)``.
     """
@@ -216,7 +242,11 @@ def added_stiffness(
         if at_rest is None:
             raise ValueError("the coupling's mechanism needs at_rest, D₂(0)")
         return -(amplitude_m**2) * (1 / (2 * operator) + 1 / at_rest)
-    raise ValueError(f"mechanism must be {JOINT!r} or {COUPLING!r}, got {mechanism!r}")
+    if mechanism == SENSOR:
+        if damping_stiffness is None:
+            raise ValueError("the sensor's mechanism needs damping_stiffness, 2ζω²")
+        return damping_stiffness**2 / operator
+    raise ValueError(f"mechanism must be {JOINT!r}, {COUPLING!r} or {SENSOR!r}, got {mechanism!r}")
 
 
 def fed_harmonic(amplitude_m: np.ndarray, operator: np.ndarray) -> np.ndarray:
@@ -236,20 +266,24 @@ def mode_columns(decision: Decision) -> ModeColumns:
     omega = 2 * np.pi * frequency
     first, zeta = float(frequency[0]), float(damping[0])
     force = joint_force(decision.base.model, levels, omega)
+    stiffness = 2 * damping * omega**2  # I
     # a N'(a) by a central difference in log amplitude (hysteretic elements included)
     step = 1e-4
     slope = (
         joint_force(decision.base.model, levels * np.exp(step), omega)
         - joint_force(decision.base.model, levels * np.exp(-step), omega)
     ) / (2 * step)
-    families = ((JOINT, JOINT_RATIOS), (COUPLING, COUPLING_RATIOS), (HARMONIC, COUPLING_RATIOS))
+    families = (
+        (JOINT, JOINT_RATIOS), (SENSOR, JOINT_RATIOS), (COUPLING, COUPLING_RATIOS),
+        (HARMONIC, COUPLING_RATIOS),
+    )  # fmt: skip
     mechanisms = tuple(m for m, grid in families for _ in grid)
     ratios = np.concatenate([grid for _, grid in families])
     tables = np.zeros((ratios.size, levels.size, len(channels)))
     f, z = channels.index("frequency_hz"), channels.index("damping_ratio")
-    for mechanism in (JOINT, COUPLING, HARMONIC):
+    for mechanism, _ in families:
         rows = np.array([m == mechanism for m in mechanisms])
-        h = 1 if mechanism == JOINT else 2
+        h = 2 if mechanism in (COUPLING, HARMONIC) else 1
         operator = _operator(first * ratios[rows, None], zeta, h * frequency)  # D₂(hω)
         if mechanism == HARMONIC:
             if "harmonic2_cos" in channels:
@@ -258,9 +292,15 @@ def mode_columns(decision: Decision) -> ModeColumns:
                 tables[rows, :, channels.index("harmonic2_sin")] = -fed.imag
             continue
         at_rest = _operator(first * ratios[rows, None], zeta, 0 * frequency)
-        added = added_stiffness(mechanism, levels, operator, force, slope, at_rest)
+        added = added_stiffness(mechanism, levels, operator, force, slope, at_rest, stiffness)
         tables[rows, :, f] = added.real / (2 * omega) / (2 * np.pi)
         tables[rows, :, z] = added.imag / (2 * omega**2)
+    # a mode the backbone would cross: no column (see the module notes)
+    widen = CROSSING_BANDWIDTHS * 2 * zeta
+    low, high = np.nanmin(frequency) * (1 - widen), np.nanmax(frequency) * (1 + widen)
+    harmonic = np.array([2.0 if m in (COUPLING, HARMONIC) else 1.0 for m in mechanisms])
+    crossed = (ratios * first / harmonic >= low) & (ratios * first / harmonic <= high)
+    tables[crossed] = 0.0
     flat = tables.reshape(ratios.size, -1)[:, metric.keep]
     columns = np.nan_to_num((metric.weights * flat).T, nan=0.0, posinf=0.0, neginf=0.0)
     scale = np.max(np.abs(columns), axis=0, initial=0.0)
@@ -268,7 +308,7 @@ def mode_columns(decision: Decision) -> ModeColumns:
     return ModeColumns(
         tables=tables, columns=columns / scale, scale=scale, mechanisms=mechanisms, ratios=ratios,
         first_frequency_hz=first, damping_ratio=zeta, frequency_hz=frequency,
-        levels_m=levels, joint_force=force, joint_slope=slope,
+        levels_m=levels, joint_force=force, joint_slope=slope, damping_stiffness=stiffness,
     )  # fmt: skip
 
 
@@ -317,14 +357,16 @@ class SecondMode:
     @property
     def text(self) -> str:
         """ "a second mode near F Hz (ratio r to the first) exchanges energy with it …"."""
-        how = (
-            "through the joint"
-            if self.mechanism == JOINT
-            else "through a quadratic coupling at twice its frequency (1:2)"
+        how = {
+            JOINT: "exchanges energy with it through the joint",
+            SENSOR: "shows in the response beside it (the sensor sees it, the base drives it)",
+        }.get(
+            self.mechanism,
+            "exchanges energy with it through a quadratic coupling at twice its frequency (1:2)",
         )
         return (
             f"a second mode near {self.frequency_hz:.4g} Hz (ratio {self.ratio:.3g} to the "
-            f"first) exchanges energy with it {how}"
+            f"first) {how}"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -379,14 +421,34 @@ class _Search:
         return float(np.quantile(np.concatenate(largest), 1 - calibration.level_each))
 
     @cached_property
+    def prominence(self) -> np.ndarray:
+        """``(M,)`` each column's gain less the larger of its family's two grid-end gains:
+        what the mode's frequency adds. Far from the first mode a family's columns tend to
+        one shape of no frequency (``N²``, ``a²``, ``I²``: a catalogue-like term), which
+        says nothing of where a mode is."""
+        out = np.zeros(self.gains.size)
+        mechanisms = np.array(self.modes.mechanisms)
+        for mechanism in dict.fromkeys(self.modes.mechanisms):
+            rows = np.flatnonzero(mechanisms == mechanism)
+            out[rows] = self.gains[rows] - max(self.gains[rows[0]], self.gains[rows[-1]])
+        return out
+
+    @cached_property
     def finding(self) -> SecondMode:
         decision, modes = self.decision, self.modes
-        best = int(np.argmax(self.gains))
+        prominence = self.prominence
+        located = prominence >= SEPARATION
+        best = int(np.argmax(prominence))
         gain = float(self.gains[best])
         catalogue = float(decision.observed.catalogue[0])
         why, threshold = "", float("nan")
         if not decision.significant:
             why = "the calibrated decision does not fire"
+        elif not located.any():
+            why = (
+                "no frequency is located: no column gains more than a mode at either end of "
+                f"its grid by {SEPARATION:g}"
+            )
         elif gain < catalogue + SEPARATION:
             why = (
                 f"its gain Δχ² {gain:.4g} does not exceed the catalogue's best "
@@ -420,14 +482,16 @@ class _Search:
 
     def amplitudes(self, index: int) -> np.ndarray:
         """The second mode's amplitude at the levels (``|q|`` through the joint, ``|κ| a²/
-        (2|D₂|)`` through the coupling, at the sensor for the harmonic column), moving at
-        :meth:`ModeColumns.harmonic`."""
+        (2|D₂|)`` through the coupling, at the sensor for the harmonic column, ``|c| I a/
+        |D₂|`` seen at the sensor), moving at :meth:`ModeColumns.harmonic`."""
         modes, theta = self.modes, self.coefficient(index)
         mechanism, h = modes.mechanisms[index], modes.harmonic(index)
         operator = modes.linear_operator(index, h)
         if mechanism == JOINT:  # |q| = b |N| a / |D₂(ω)|, b = √b²
             force = np.sqrt(max(theta, 0.0)) * modes.joint_force
             return np.abs(force * modes.levels_m / operator)
+        if mechanism == SENSOR:  # driven by the base, A = I a at phase resonance
+            return np.abs(theta * modes.damping_stiffness * modes.levels_m / operator)
         coupling = np.sqrt(max(theta, 0.0)) if mechanism == COUPLING else theta
         return np.abs(coupling * modes.levels_m**2 / (2 * operator))
 
@@ -459,15 +523,18 @@ class _Search:
             frequency = table[:, channels.index("frequency_hz")]
             top = int(np.argmax(np.abs(damping)))
             onset = int(np.argmax(np.abs(damping) >= 0.5 * abs(damping[top])))
+            sensor = modes.mechanisms[index] == SENSOR
             out.append(
-                f"damping rising where the energy leaves: +{100 * damping[top]:.2g} %-points "
-                f"at {mm[top]:.2g} mm, from about {mm[onset]:.2g} mm"
-            )
+                ("the measured damping moved with it" if sensor
+                 else "damping rising where the energy leaves")
+                + f": {100 * damping[top]:+.2g} %-points at {mm[top]:.2g} mm, from about "
+                f"{mm[onset]:.2g} mm"
+            )  # fmt: skip
             j = int(np.argmax(np.abs(frequency)))
             out.append(
                 f"the backbone pushed {'down' if frequency[j] < 0 else 'up'} by "
-                f"{abs(frequency[j]):.2g} Hz at {mm[j]:.2g} mm, away from the other mode"
-                + ("" if modes.mechanisms[index] == JOINT else "'s half")
+                f"{abs(frequency[j]):.2g} Hz at {mm[j]:.2g} mm"
+                + (", following the damping" if sensor else ", away from the other mode")
             )
         else:
             ratio = second / modes.levels_m
