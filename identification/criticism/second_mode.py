@@ -15,9 +15,11 @@ linearised statistic and its own calibrated bootstrap.
   ``N(a) = Σ c_i (k_eq,i + iω c_eq,i)(a) − N(0)`` (the base model's own describing
   functions: the linear part at rest is in the modes). Eliminating ``q``
   (``q = −b N x / D₂(ω)``, ``D₂(Ω) = ω₂² − Ω² + 2iζ₂ω₂Ω``) adds
-  ``Δ(a) = −b² [N² / D₂ + a N′(a) Re(N / D₂)]`` to the first mode's dynamic stiffness at
+  ``Δ(a) = −b² [N² / D₂ + w a N′(a) Re(N / D₂)]`` to the first mode's dynamic stiffness at
   its own amplitude ``a`` (the second term: the joint moves by ``|u| = a |1 − b² N/D₂|``,
-  not ``a``, and its force follows). The phase-resonant frequency moves by
+  not ``a``, and its force follows: ``w = 1`` where the sensor sees the first mode alone;
+  where it sees the second mode too, ``a`` moves with ``|u|`` and ``w`` is less, so
+  :data:`JOINT_WEIGHTS` is a grid). The phase-resonant frequency moves by
   ``Re Δ / (2ω)`` and the damping ratio by ``Im Δ / (2ω²)`` — the backbone pushed away
   from the other mode, damping rising where the energy leaves. The column is ``∂/∂b²``
   (one-sided: ``b² ≥ 0``).
@@ -95,6 +97,7 @@ __all__ = [
     "HARMONIC",
     "JOINT",
     "JOINT_RATIOS",
+    "JOINT_WEIGHTS",
     "SENSOR",
     "ModeColumns",
     "SecondMode",
@@ -115,6 +118,9 @@ HARMONIC = "harmonic"
 SENSOR = "sensor"
 #: Second-mode frequencies over the first's tried through the joint (0.5 % steps).
 JOINT_RATIOS = tuple(np.round(np.arange(0.8, 1.25 + 1e-9, 0.005), 4))
+#: Weights ``w`` of the joint's amplitude term (module notes): what the sensor sees of the
+#: second mode is not known from one sensor.
+JOINT_WEIGHTS = (0.0, 0.5, 1.0)
 #: Second-mode frequencies over the first's tried through a quadratic coupling.
 COUPLING_RATIOS = tuple(np.round(np.arange(1.6, 2.4 + 1e-9, 0.005), 4))
 #: Whether a column's coefficient (``b²``, ``κ²``; ``κφ₂``) has one physical sign.
@@ -140,9 +146,9 @@ class ModeColumns:
         ``κ²`` of order 10¹⁴ N²/m⁶).
     scale
         ``(M,)`` the largest absolute weighted entry of each column (1 where it is 0).
-    mechanisms, ratios
-        ``(M,)`` each column's mechanism (:data:`JOINT`, :data:`COUPLING`, :data:`HARMONIC`)
-        and ``ω₂/ω₁``.
+    mechanisms, ratios, weights
+        ``(M,)`` each column's mechanism (:data:`JOINT`, :data:`SENSOR`, :data:`COUPLING`,
+        :data:`HARMONIC`), ``ω₂/ω₁`` and the joint's amplitude weight (1 elsewhere).
     first_frequency_hz, damping_ratio
         ``ω₁/2π`` and the ``ζ₂`` the columns use (the base model's, at the lowest level).
     frequency_hz, levels_m
@@ -159,6 +165,7 @@ class ModeColumns:
     scale: np.ndarray
     mechanisms: tuple[str, ...]
     ratios: np.ndarray
+    weights: np.ndarray
     first_frequency_hz: float
     damping_ratio: float
     frequency_hz: np.ndarray
@@ -274,15 +281,16 @@ def mode_columns(decision: Decision) -> ModeColumns:
         - joint_force(decision.base.model, levels * np.exp(-step), omega)
     ) / (2 * step)
     families = (
-        (JOINT, JOINT_RATIOS), (SENSOR, JOINT_RATIOS), (COUPLING, COUPLING_RATIOS),
-        (HARMONIC, COUPLING_RATIOS),
+        *((JOINT, JOINT_RATIOS, w) for w in JOINT_WEIGHTS), (SENSOR, JOINT_RATIOS, 1.0),
+        (COUPLING, COUPLING_RATIOS, 1.0), (HARMONIC, COUPLING_RATIOS, 1.0),
     )  # fmt: skip
-    mechanisms = tuple(m for m, grid in families for _ in grid)
-    ratios = np.concatenate([grid for _, grid in families])
+    mechanisms = tuple(m for m, grid, _ in families for _ in grid)
+    ratios = np.concatenate([grid for _, grid, _ in families])
+    weights = np.concatenate([np.full(len(grid), w) for _, grid, w in families])
     tables = np.zeros((ratios.size, levels.size, len(channels)))
     f, z = channels.index("frequency_hz"), channels.index("damping_ratio")
-    for mechanism, _ in families:
-        rows = np.array([m == mechanism for m in mechanisms])
+    for mechanism, _, weight in families:
+        rows = np.array([m == mechanism for m in mechanisms]) & (weights == weight)
         h = 2 if mechanism in (COUPLING, HARMONIC) else 1
         operator = _operator(first * ratios[rows, None], zeta, h * frequency)  # D₂(hω)
         if mechanism == HARMONIC:
@@ -292,7 +300,9 @@ def mode_columns(decision: Decision) -> ModeColumns:
                 tables[rows, :, channels.index("harmonic2_sin")] = -fed.imag
             continue
         at_rest = _operator(first * ratios[rows, None], zeta, 0 * frequency)
-        added = added_stiffness(mechanism, levels, operator, force, slope, at_rest, stiffness)
+        added = added_stiffness(
+            mechanism, levels, operator, force, weight * slope, at_rest, stiffness
+        )
         tables[rows, :, f] = added.real / (2 * omega) / (2 * np.pi)
         tables[rows, :, z] = added.imag / (2 * omega**2)
     # a mode the backbone would cross: no column (see the module notes)
@@ -307,6 +317,7 @@ def mode_columns(decision: Decision) -> ModeColumns:
     scale[scale == 0] = 1.0
     return ModeColumns(
         tables=tables, columns=columns / scale, scale=scale, mechanisms=mechanisms, ratios=ratios,
+        weights=weights,
         first_frequency_hz=first, damping_ratio=zeta, frequency_hz=frequency,
         levels_m=levels, joint_force=force, joint_slope=slope, damping_stiffness=stiffness,
     )  # fmt: skip
@@ -427,9 +438,9 @@ class _Search:
         one shape of no frequency (``N²``, ``a²``, ``I²``: a catalogue-like term), which
         says nothing of where a mode is."""
         out = np.zeros(self.gains.size)
-        mechanisms = np.array(self.modes.mechanisms)
-        for mechanism in dict.fromkeys(self.modes.mechanisms):
-            rows = np.flatnonzero(mechanisms == mechanism)
+        families = list(zip(self.modes.mechanisms, self.modes.weights, strict=True))
+        for family in dict.fromkeys(families):
+            rows = np.flatnonzero([f == family for f in families])
             out[rows] = self.gains[rows] - max(self.gains[rows[0]], self.gains[rows[-1]])
         return out
 
