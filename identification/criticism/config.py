@@ -85,9 +85,10 @@ class Verdict(StrEnum):
         The decision fires and no catalogue effect is proposed: the free-form describing
         functions show the shape of what is missing.
     SECOND_MODE
-        The decision fires and a second mode exchanging energy with the measured one gains
-        more than the catalogue's best effect, by :data:`SEPARATION`, and more than its own
-        calibrated threshold (:mod:`identification.criticism.second_mode`).
+        The decision fires and a second mode exchanging energy with the measured one (or
+        seen beside it) locates a frequency and gains more than its own calibrated
+        threshold and than the catalogue's best column by :data:`SEPARATION`
+        (:mod:`identification.criticism.second_mode`).
     """
 
     NOTHING_MISSING = "nothing missing"
