@@ -84,8 +84,11 @@ class Verdict(StrEnum):
     NOT_EXPLAINED
         The decision fires and no catalogue effect is proposed: the free-form describing
         functions show the shape of what is missing.
-
-    The several-modes work adds "a second mode" to this list.
+    SECOND_MODE
+        The decision fires and a second mode exchanging energy with the measured one (or
+        seen beside it) locates a frequency and gains more than its own calibrated
+        threshold and than the catalogue's best column by :data:`SEPARATION`
+        (:mod:`identification.criticism.second_mode`).
     """
 
     NOTHING_MISSING = "nothing missing"
@@ -93,6 +96,7 @@ class Verdict(StrEnum):
     EXPLAINED = "explained"
     PARTLY_EXPLAINED = "partly explained"
     NOT_EXPLAINED = "not explained by the catalogue"
+    SECOND_MODE = "explained by a second mode"
 
 
 #: The verdicts, in :class:`Verdict`'s order.

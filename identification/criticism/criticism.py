@@ -110,6 +110,7 @@ from identification.criticism.records import (
     Trial,
 )
 from identification.criticism.refits import Refits
+from identification.criticism.second_mode import SecondMode, second_mode
 from identification.effects import CATALOGUE, get_effect
 from identification.fitting.data import FitData, fit_data
 from identification.fitting.fitter import Fitter
@@ -319,7 +320,6 @@ class Criticism:
     missing = _Part("ranking")
     best = _Part("ranking")
     explained_share = _Part("ranking")
-    verdict = _Part("ranking")
     provisional = _Part("ranking")
     alternatives = _Part("ranking")
     # the groups
@@ -327,10 +327,28 @@ class Criticism:
     term_trials = _Part("grouping")
     term_groups = _Part("grouping")
 
+    @cached_property
+    def second_mode(self) -> SecondMode:
+        """The second-mode finding (:mod:`~identification.criticism.second_mode`): whether
+        a second mode exchanging energy with this one explains the data better than the
+        catalogue, its frequency, share and where it shows."""
+        return second_mode(self.decision)
+
+    @property
+    def verdict(self) -> Verdict:
+        """The verdict (:class:`~identification.criticism.config.Verdict`): the ranking's,
+        or "explained by a second mode" where :attr:`second_mode` is named."""
+        verdict = self.ranking.verdict
+        if self.significant and self.second_mode.named:
+            return Verdict.SECOND_MODE
+        return verdict
+
     @property
     def unexplained(self) -> bool:
         """Whether something is missing that the catalogue does not (fully) explain."""
-        return self.verdict in (Verdict.PARTLY_EXPLAINED, Verdict.NOT_EXPLAINED)
+        return self.verdict in (
+            Verdict.PARTLY_EXPLAINED, Verdict.NOT_EXPLAINED, Verdict.SECOND_MODE
+        )  # fmt: skip
 
     @property
     def adequate(self) -> bool:

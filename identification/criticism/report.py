@@ -29,6 +29,7 @@ def round_report(crit: Criticism) -> dict[str, Any]:
         "threshold": crit.threshold,
         "p_value": crit.p_value,
         "explained_share": crit.explained_share,
+        "second_mode": _second_mode(crit),
         "ranking": [ranking_entry(c) for c in crit.missing()],
         "groups": [g.to_dict() for g in crit.groups],
         "term_groups": [g.to_dict() for g in crit.term_groups],
@@ -58,6 +59,7 @@ def to_dict(crit: Criticism) -> dict[str, Any]:
         "small": crit.small,
         "unexplained": crit.unexplained,
         "explained_share": crit.explained_share,
+        "second_mode": _second_mode(crit),
         "threshold": crit.threshold,
         "thresholds": crit.calibration.to_dict(),
         "alpha": crit.alpha,
@@ -103,6 +105,12 @@ def to_dict(crit: Criticism) -> dict[str, Any]:
         "amplitude_mm": (1e3 * crit.data.levels_m).tolist(),
         "comparison": comparison,
     }
+
+
+def _second_mode(crit: Criticism) -> dict[str, Any] | None:
+    """The second-mode finding (``frequency_hz``, ``ratio``, ``share``, ``where``, whether
+    it was ``named`` and why not); None where the decision does not fire."""
+    return crit.second_mode.to_dict() if crit.significant else None
 
 
 def to_json(crit: Criticism) -> str:

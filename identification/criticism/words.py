@@ -26,6 +26,7 @@ __all__ = [
     "caveats",
     "nearby_mode_words",
     "no_solution_texts",
+    "second_mode_words",
     "separates_nearby_mode",
     "summary",
     "verdict_text",
@@ -48,6 +49,8 @@ def _verdict_words(crit: Criticism) -> str:
         return "nothing missing beyond the scatter"
     if verdict == Verdict.DRIFT:
         return "nothing missing as physics; the branches show drift (see below)"
+    if verdict == Verdict.SECOND_MODE:
+        return f"explained by a second mode: {second_mode_words(crit)}"
     best = crit.best
     if verdict == Verdict.EXPLAINED:
         return f"explained by {best.effect} ({100 * (share or 1):.0f} % of the free-form gain)"
@@ -70,6 +73,16 @@ def _verdict_words(crit: Criticism) -> str:
     if best is not None and share is not None:
         text += f" (the best catalogue effect, {best.effect}, captures {100 * share:.0f} %)"
     return text + "; the free-form describing functions show the shape of what is missing"
+
+
+def second_mode_words(crit: Criticism) -> str:
+    """The second-mode finding in words: the mode, how it beats the catalogue, where it shows."""
+    mode = crit.second_mode
+    return (
+        f"{mode.text} (Δχ² {mode.gain:.4g} against the catalogue's best {mode.catalogue_gain:.4g}"
+        f" and its calibrated threshold {mode.threshold:.3g}); where it shows: "
+        + "; ".join(mode.where)
+    )
 
 
 def caveats(crit: Criticism) -> list[str]:
@@ -133,6 +146,9 @@ def summary(crit: Criticism) -> str:
     for text in no_solution_texts(crit):
         lines.append(f"fails: {text}")
     lines.append(f"verdict: {crit.verdict_text}")
+    if crit.significant and not crit.second_mode.named:
+        mode = crit.second_mode
+        lines.append(f"second mode: not named — {mode.why} (best: {mode.text})")
     proposed = crit.missing()
     groups, term_groups = crit.groups, crit.term_groups
     lines.append(

@@ -1,0 +1,559 @@
+"""A missing mode as a finding: a second mode that exchanges energy with the criticised one.
+
+A one-mode model criticised on data that carry a second mode sees physics it lacks — a
+backbone that flattens or bends as it nears the other mode, damping that rises where the
+energy leaves, a second harmonic that the other mode amplifies — and the catalogue offers
+effects that each mimic a part of it. This module asks the data whether a second mode
+explains them better than the catalogue's best effect, with the criticism's own
+linearised statistic and its own calibrated bootstrap.
+
+**Two mechanisms, one column each per frequency.** With complex amplitudes at the levels
+(``ω(a)`` the refitted base model's backbone, ``a`` the response amplitude):
+
+* *through the joint* — a mode ``q`` at ``ω₂`` sharing ``b`` of the joint displacement
+  (``u = x + b q``) is driven by the joint's force beyond what it is at rest,
+  ``N(a) = Σ c_i (k_eq,i + iω c_eq,i)(a) − N(0)`` (the base model's own describing
+  functions: the linear part at rest is in the modes). Eliminating ``q``
+  (``q = −b N x / D₂(ω)``, ``D₂(Ω) = ω₂² − Ω² + 2iζ₂ω₂Ω``) adds
+  ``Δ(a) = −b² [N² / D₂ + w a N′(a) Re(N / D₂)]`` to the first mode's dynamic stiffness at
+  its own amplitude ``a`` (the second term: the joint moves by ``|u| = a |1 − b² N/D₂|``,
+  not ``a``, and its force follows: ``w = 1`` where the sensor sees the first mode alone;
+  where it sees the second mode too, ``a`` moves with ``|u|`` and ``w`` is less, so
+  :data:`JOINT_WEIGHTS` is a grid). The phase-resonant frequency moves by
+  ``Re Δ / (2ω)`` and the damping ratio by ``Im Δ / (2ω²)`` — the backbone pushed away
+  from the other mode, damping rising where the energy leaves. The column is ``∂/∂b²``
+  (one-sided: ``b² ≥ 0``).
+* *through a quadratic coupling* (1:2) — a mode near ``2ω`` driven by a modal potential
+  ``κ x² q``: its response ``Z = −κ a²/(2 D₂(2ω))`` at ``2ω`` and its mean
+  ``−κ a²/(2ω₂²)`` act back on the first mode (force ``2κ x q``), adding
+  ``Δ(a) = −κ² a² [1 / (2 D₂(2ω)) + 1/ω₂²]`` to its dynamic stiffness: the column is
+  ``∂/∂κ²`` (one-sided, :data:`COUPLING`). The same
+  response adds ``C₂/a − iS₂/a = −θ a / (2 D₂(2ω))`` to the measured second harmonic
+  (``θ = κ φ₂``, either sign, :data:`HARMONIC`; the relative displacement
+  ``x = a cos θ + C₂ cos 2θ + S₂ sin 2θ``). As the backbone moves ``2ω`` towards ``ω₂``
+  both turn in size and phase, which no catalogue term (whose even harmonics follow the
+  first mode's own operator) does.
+
+* *seen at the response sensor* — a mode the sensor sees (shape ``s`` there) and the base
+  drives (participation ``Γ₂``) adds ``c/D₂(ω)``, ``c = sΓ₂``, to the measured receptance
+  ``1/K₁``. The lock on the measured phase then moves ``ω²`` by ``Re(c I²/D₂)`` and the
+  power-balance damping ratio by ``Im(c I²/D₂)/(2ω²)``, ``I = 2ζ(a)ω(a)²`` the first
+  mode's damping stiffness: ``Δ = I²/D₂(ω)`` per unit ``c`` (either sign,
+  :data:`SENSOR`), which follows the damping as it changes with amplitude (a constant
+  shift is the linear stiffness's).
+
+``ω₂ = r · ω₁`` over :data:`JOINT_RATIOS` and :data:`COUPLING_RATIOS` (``ω₁`` the base
+model's frequency at the lowest level) and ``ζ₂`` the base model's damping ratio there (a
+mode damped like the one measured: the data of one mode cannot say more). A mode the
+backbone would cross — ``ω₂`` (``ω₂/2`` at 1:2) within the backbone's frequency range
+widened by :data:`CROSSING_BANDWIDTHS` half-power bandwidths — gets no column: there the
+linearisation is singular, and a one-mode backbone could not pass it.
+
+**The rule** (fixed before the study, ``docs/criticism.md``, "A missing mode"). A second
+mode is named when
+
+1. the calibrated decision fires (:attr:`Decision.significant`: the only test that says
+   something is missing);
+2. the column whose frequency adds most — the largest *prominence*, its gain less the
+   larger of its family's two grid-end gains (where the mode is far and the column a
+   catalogue-like shape of no frequency) — locates a mode (prominence ≥
+   :data:`~.config.SEPARATION`), and its ``χ²`` gain exceeds its own threshold, the ``1 − α'``
+   quantile of the largest second-mode gain over the decision's bootstrap campaigns
+   (the same campaigns, ``α'`` the level each of the decision's two tests holds:
+   :attr:`Calibration.level_each`); and
+3. it exceeds the catalogue's best column gain by :data:`~.config.SEPARATION` (χ²₁, 1 %):
+   within that, the data cannot tell the mode from the catalogue's effect, and the
+   catalogue's answer stands.
+
+On a campaign the base model explains, 1 fails with probability ``α``: no new false
+finding. The mode's frequency is the best column's, its coefficient the linearised fit
+``θ̂ = g⊥ᵀz / |g⊥|²``, and from it the energy share it carries at the top level
+(:func:`identification.multimode.solve.energy_shares`) and where it shows.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from functools import cached_property
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from identification.criticism import calibration as cal
+from identification.criticism.config import LINEAR_PAIR, SEPARATION
+from identification.criticism.directions import Direction, mean_prediction
+from identification.effects import CATALOGUE
+from identification.multimode.solve import energy_shares
+
+if TYPE_CHECKING:
+    from identification.criticism.decision import Decision
+    from identification.model import JointModel
+
+__all__ = [
+    "COUPLING",
+    "COUPLING_RATIOS",
+    "CROSSING_BANDWIDTHS",
+    "HARMONIC",
+    "JOINT",
+    "JOINT_RATIOS",
+    "JOINT_WEIGHTS",
+    "SENSOR",
+    "ModeColumns",
+    "SecondMode",
+    "added_stiffness",
+    "fed_harmonic",
+    "joint_force",
+    "mode_columns",
+    "second_mode",
+]
+
+#: The mechanism of a mode near the first, coupled through the joint's force.
+JOINT = "joint"
+#: A mode near twice the first, coupled quadratically: as the first mode's backbone sees it.
+COUPLING = "coupling"
+#: The same mode as the second harmonic of the response sees it.
+HARMONIC = "harmonic"
+#: A mode near the first that the response sensor sees beside it.
+SENSOR = "sensor"
+#: Second-mode frequencies over the first's tried through the joint (0.5 % steps).
+JOINT_RATIOS = tuple(np.round(np.arange(0.8, 1.25 + 1e-9, 0.005), 4))
+#: Weights ``w`` of the joint's amplitude term (module notes): what the sensor sees of the
+#: second mode is not known from one sensor.
+JOINT_WEIGHTS = (0.0, 0.5, 1.0)
+#: Second-mode frequencies over the first's tried through a quadratic coupling.
+COUPLING_RATIOS = tuple(np.round(np.arange(1.6, 2.4 + 1e-9, 0.005), 4))
+#: Whether a column's coefficient (``b²``, ``κ²``; ``κφ₂``) has one physical sign.
+_ONE_SIDED = {JOINT: True, COUPLING: True, HARMONIC: False, SENSOR: False}
+#: Half-power bandwidths (2ζ of the frequency) by which the backbone's frequency range is
+#: widened to find the modes it would cross.
+CROSSING_BANDWIDTHS = 2.0
+#: Amplitude (relative to the lowest level) at which the joint counts as at rest.
+_AT_REST = 1e-3
+
+
+@dataclass(frozen=True, eq=False)
+class ModeColumns:
+    """The second-mode columns of one criticism (see the module notes).
+
+    Attributes
+    ----------
+    tables
+        ``(M, n_levels, n_channels)`` change of the mean prediction per unit coefficient.
+    columns
+        ``(p, M)`` the same, weighted kept entries (the likelihood's space), each divided
+        by its ``scale`` (coefficients of very different sizes: ``b²`` is of order 1,
+        ``κ²`` of order 10¹⁴ N²/m⁶).
+    scale
+        ``(M,)`` the largest absolute weighted entry of each column (1 where it is 0).
+    mechanisms, ratios, weights
+        ``(M,)`` each column's mechanism (:data:`JOINT`, :data:`SENSOR`, :data:`COUPLING`,
+        :data:`HARMONIC`), ``ω₂/ω₁`` and the joint's amplitude weight (1 elsewhere).
+    first_frequency_hz, damping_ratio
+        ``ω₁/2π`` and the ``ζ₂`` the columns use (the base model's, at the lowest level).
+    frequency_hz, levels_m
+        The base model's backbone at the levels and the levels.
+    joint_force, joint_slope
+        ``(n_levels,)`` ``N(a)``, the joint's complex stiffness beyond rest, and
+        ``a N′(a)``.
+    damping_stiffness
+        ``(n_levels,)`` ``I = 2ζ(a)ω(a)²`` of the base model's backbone.
+    """
+
+    tables: np.ndarray
+    columns: np.ndarray
+    scale: np.ndarray
+    mechanisms: tuple[str, ...]
+    ratios: np.ndarray
+    weights: np.ndarray
+    first_frequency_hz: float
+    damping_ratio: float
+    frequency_hz: np.ndarray
+    levels_m: np.ndarray
+    joint_force: np.ndarray
+    joint_slope: np.ndarray
+    damping_stiffness: np.ndarray
+
+    @property
+    def directions(self) -> list[Direction]:
+        """Each column as the statistics read it (the joint's ``b²`` is one-sided)."""
+        return [
+            Direction(f"second mode ({m})", {"ratio": float(r)}, int(_ONE_SIDED[m]))
+            for m, r in zip(self.mechanisms, self.ratios, strict=True)
+        ]
+
+    @property
+    def one_sided(self) -> np.ndarray:
+        """``(M,)`` whether each column's coefficient has one physical sign."""
+        return np.array([_ONE_SIDED[m] for m in self.mechanisms])
+
+    def harmonic(self, index: int) -> int:
+        """The harmonic of the first mode's frequency column ``index``'s mode moves at."""
+        return 2 if self.mechanisms[index] in (COUPLING, HARMONIC) else 1
+
+    def linear_operator(self, index: int, harmonic: int) -> np.ndarray:
+        """``D₂(hω)`` of column ``index`` at the levels."""
+        return _operator(
+            self.first_frequency_hz * self.ratios[index], self.damping_ratio,
+            harmonic * self.frequency_hz,
+        )  # fmt: skip
+
+
+def _operator(frequency_hz: np.ndarray, damping_ratio: float, at_hz: np.ndarray) -> np.ndarray:
+    """``D₂(Ω) = ω₂² − Ω² + 2iζ₂ω₂Ω`` of a mode at ``frequency_hz``, at ``at_hz``."""
+    omega2, omega = 2 * np.pi * np.asarray(frequency_hz), 2 * np.pi * np.asarray(at_hz)
+    return omega2**2 - omega**2 + 2j * damping_ratio * omega2 * omega
+
+
+def joint_force(model: JointModel, levels_m: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """``N(a)``: the complex stiffness ``Σ c (k_eq + iω c_eq)`` of the model's terms beyond
+    the linear pair, less its value at rest (the modes at rest hold that part)."""
+    rest = np.full_like(levels_m, _AT_REST * np.min(levels_m))
+    total = np.zeros(levels_m.size, complex)
+    for term in model.terms:
+        if term.effect in LINEAR_PAIR:
+            continue
+        spec = CATALOGUE[term.effect]
+        k_eq, c_eq = spec.describing(levels_m, omega, **term.shape)
+        k_0, c_0 = spec.describing(rest, omega, **term.shape)
+        total += term.coefficient * ((k_eq - k_0) + 1j * omega * (c_eq - c_0))
+    return total
+
+
+def added_stiffness(
+    mechanism: str,
+    amplitude_m: np.ndarray,
+    operator: np.ndarray,
+    joint_force: np.ndarray | None = None,
+    joint_slope: np.ndarray | None = None,
+    at_rest: np.ndarray | None = None,
+    damping_stiffness: np.ndarray | None = None,
+) -> np.ndarray:
+    """``Δ``, the first mode's added complex dynamic stiffness per unit coefficient, at its
+    own amplitude ``a``.
+
+    ``−[N² / D₂(ω) + a N′ Re(N / D₂(ω))]`` per unit ``b²`` through the joint
+    (``joint_force`` ``N(a)``, ``joint_slope`` ``a N′(a)``, ``operator`` ``D₂(ω)``);
+    ``−a² [1 / (2 D₂(2ω)) + 1/D₂(0)]`` per unit ``κ²`` through a quadratic coupling
+    (``operator`` ``D₂(2ω)``, ``at_rest`` ``D₂(0) = ω₂²``: the second mode's mean);
+    ``I² / D₂(ω)`` per unit ``sΓ₂`` seen at the sensor (``damping_stiffness`` ``I``). The
+    phase-resonant frequency moves by ``Re Δ / (2ω)`` (rad/s) and the damping ratio by
+    ``Im Δ / (2ω²)``.
+    """
+    if mechanism == JOINT:
+        if joint_force is None or joint_slope is None:
+            raise ValueError("the joint's mechanism needs joint_force and joint_slope")
+        ratio = joint_force / operator
+        return -(joint_force * ratio + joint_slope * ratio.real)
+    if mechanism == COUPLING:
+        if at_rest is None:
+            raise ValueError("the coupling's mechanism needs at_rest, D₂(0)")
+        return -(amplitude_m**2) * (1 / (2 * operator) + 1 / at_rest)
+    if mechanism == SENSOR:
+        if damping_stiffness is None:
+            raise ValueError("the sensor's mechanism needs damping_stiffness, 2ζω²")
+        return damping_stiffness**2 / operator
+    raise ValueError(f"mechanism must be {JOINT!r}, {COUPLING!r} or {SENSOR!r}, got {mechanism!r}")
+
+
+def fed_harmonic(amplitude_m: np.ndarray, operator: np.ndarray) -> np.ndarray:
+    """``(C₂ − iS₂)/a`` per unit ``κφ₂``: the second harmonic of the response (relative to
+    the fundamental ``a cos θ``) that a mode with ``operator`` ``D₂(2ω)`` adds."""
+    return -amplitude_m / (2 * operator)
+
+
+def mode_columns(decision: Decision) -> ModeColumns:
+    """The second-mode columns at the decision's refitted base model."""
+    data, metric = decision.data, decision.metric
+    table = mean_prediction(data, decision.base.predicted)
+    channels = list(data.channels)
+    frequency = table[:, channels.index("frequency_hz")]
+    damping = table[:, channels.index("damping_ratio")]
+    levels = data.levels_m
+    omega = 2 * np.pi * frequency
+    first, zeta = float(frequency[0]), float(damping[0])
+    force = joint_force(decision.base.model, levels, omega)
+    stiffness = 2 * damping * omega**2  # I
+    # a N'(a) by a central difference in log amplitude (hysteretic elements included)
+    step = 1e-4
+    slope = (
+        joint_force(decision.base.model, levels * np.exp(step), omega)
+        - joint_force(decision.base.model, levels * np.exp(-step), omega)
+    ) / (2 * step)
+    families = (
+        *((JOINT, JOINT_RATIOS, w) for w in JOINT_WEIGHTS), (SENSOR, JOINT_RATIOS, 1.0),
+        (COUPLING, COUPLING_RATIOS, 1.0), (HARMONIC, COUPLING_RATIOS, 1.0),
+    )  # fmt: skip
+    mechanisms = tuple(m for m, grid, _ in families for _ in grid)
+    ratios = np.concatenate([grid for _, grid, _ in families])
+    weights = np.concatenate([np.full(len(grid), w) for _, grid, w in families])
+    tables = np.zeros((ratios.size, levels.size, len(channels)))
+    f, z = channels.index("frequency_hz"), channels.index("damping_ratio")
+    for mechanism, _, weight in families:
+        rows = np.array([m == mechanism for m in mechanisms]) & (weights == weight)
+        h = 2 if mechanism in (COUPLING, HARMONIC) else 1
+        operator = _operator(first * ratios[rows, None], zeta, h * frequency)  # D₂(hω)
+        if mechanism == HARMONIC:
+            if "harmonic2_cos" in channels:
+                fed = fed_harmonic(levels, operator)
+                tables[rows, :, channels.index("harmonic2_cos")] = fed.real
+                tables[rows, :, channels.index("harmonic2_sin")] = -fed.imag
+            continue
+        at_rest = _operator(first * ratios[rows, None], zeta, 0 * frequency)
+        added = added_stiffness(
+            mechanism, levels, operator, force, weight * slope, at_rest, stiffness
+        )
+        tables[rows, :, f] = added.real / (2 * omega) / (2 * np.pi)
+        tables[rows, :, z] = added.imag / (2 * omega**2)
+    # a mode the backbone would cross: no column (see the module notes)
+    widen = CROSSING_BANDWIDTHS * 2 * zeta
+    low, high = np.nanmin(frequency) * (1 - widen), np.nanmax(frequency) * (1 + widen)
+    harmonic = np.array([2.0 if m in (COUPLING, HARMONIC) else 1.0 for m in mechanisms])
+    crossed = (ratios * first / harmonic >= low) & (ratios * first / harmonic <= high)
+    tables[crossed] = 0.0
+    flat = tables.reshape(ratios.size, -1)[:, metric.keep]
+    columns = np.nan_to_num((metric.weights * flat).T, nan=0.0, posinf=0.0, neginf=0.0)
+    scale = np.max(np.abs(columns), axis=0, initial=0.0)
+    scale[scale == 0] = 1.0
+    return ModeColumns(
+        tables=tables, columns=columns / scale, scale=scale, mechanisms=mechanisms, ratios=ratios,
+        weights=weights,
+        first_frequency_hz=first, damping_ratio=zeta, frequency_hz=frequency,
+        levels_m=levels, joint_force=force, joint_slope=slope, damping_stiffness=stiffness,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class SecondMode:
+    """The second-mode finding of one criticism.
+
+    Attributes
+    ----------
+    named
+        Whether the rule (module notes) names a second mode.
+    mechanism
+        :data:`JOINT`, :data:`COUPLING` or :data:`HARMONIC`: how it exchanges energy with
+        the measured mode (the last two: one 1:2 mechanism, seen in the backbone or in the
+        second harmonic).
+    ratio, frequency_hz
+        Its frequency over the first mode's, and in Hz.
+    first_frequency_hz
+        The first mode's frequency it is measured against (the base model's at the
+        lowest level).
+    share
+        The energy share it carries at the top level (from the linearised fit).
+    gain, threshold
+        Its best column's ``χ²`` gain and the calibrated threshold (NaN where the rule
+        was decided before the bootstrap was needed).
+    catalogue_gain
+        The catalogue's best column gain (what it must exceed by ``SEPARATION``).
+    where
+        Where it shows, in words (participation, damping, the harmonic it feeds).
+    why
+        Why it was not named (empty when named).
+    """
+
+    named: bool
+    mechanism: str
+    ratio: float
+    frequency_hz: float
+    first_frequency_hz: float
+    share: float
+    gain: float
+    threshold: float
+    catalogue_gain: float
+    where: tuple[str, ...] = ()
+    why: str = ""
+
+    @property
+    def text(self) -> str:
+        """ "a second mode near F Hz (ratio r to the first) exchanges energy with it …"."""
+        how = {
+            JOINT: "exchanges energy with it through the joint",
+            SENSOR: "shows in the response beside it (the sensor sees it, the base drives it)",
+        }.get(
+            self.mechanism,
+            "exchanges energy with it through a quadratic coupling at twice its frequency (1:2)",
+        )
+        return (
+            f"a second mode near {self.frequency_hz:.4g} Hz (ratio {self.ratio:.3g} to the "
+            f"first) {how}"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self) | {"where": list(self.where), "text": self.text}
+
+
+def second_mode(decision: Decision) -> SecondMode:
+    """The second-mode finding at ``decision`` (the rule of the module notes)."""
+    return _Search(decision).finding
+
+
+class _Search:
+    """The rule applied to one decision: observed gains first, the bootstrap only where
+    the observed gains leave the answer open."""
+
+    def __init__(self, decision: Decision) -> None:
+        self.decision = decision
+        self.modes = mode_columns(decision)
+
+    @cached_property
+    def projected(self) -> np.ndarray:
+        """The columns whitened and projected off the base model's directions."""
+        return cal.project(self.decision.observed, self.modes.columns)
+
+    @cached_property
+    def scores(self) -> np.ndarray:
+        z = self.decision.observed.frame["z"]
+        norms = np.linalg.norm(self.projected, axis=0)
+        silent = norms <= 1e-9
+        return np.where(silent, 0.0, self.projected.T @ z / np.where(silent, 1.0, norms))
+
+    @cached_property
+    def gains(self) -> np.ndarray:
+        return np.where(self.modes.one_sided & (self.scores < 0), 0.0, self.scores**2)
+
+    def threshold(self) -> float:
+        """The ``1 − level_each`` quantile of the largest second-mode gain over the
+        decision's own bootstrap campaigns (same seed and batches: the same campaigns)."""
+        decision = self.decision
+        problem = dataclasses.replace(
+            decision.problem, candidates=self.modes.columns, directions=self.modes.directions
+        )
+        calibration = decision.calibration
+        rng = np.random.default_rng(calibration.seed)
+        largest = []
+        for first in range(0, calibration.n_bootstrap, cal._BATCH):
+            n = min(cal._BATCH, calibration.n_bootstrap - first)
+            residual, covariance = cal.simulate(decision.problem, n, rng)
+            stats = cal.statistics(problem, residual, covariance,
+                                   decision.observed.reference_rank)  # fmt: skip
+            largest.append(stats.catalogue)  # the largest column gain: the modes' here
+        return float(np.quantile(np.concatenate(largest), 1 - calibration.level_each))
+
+    @cached_property
+    def prominence(self) -> np.ndarray:
+        """``(M,)`` each column's gain less the larger of its family's two grid-end gains:
+        what the mode's frequency adds. Far from the first mode a family's columns tend to
+        one shape of no frequency (``N²``, ``a²``, ``I²``: a catalogue-like term), which
+        says nothing of where a mode is."""
+        out = np.zeros(self.gains.size)
+        families = list(zip(self.modes.mechanisms, self.modes.weights, strict=True))
+        for family in dict.fromkeys(families):
+            rows = np.flatnonzero([f == family for f in families])
+            out[rows] = self.gains[rows] - max(self.gains[rows[0]], self.gains[rows[-1]])
+        return out
+
+    @cached_property
+    def finding(self) -> SecondMode:
+        decision, modes = self.decision, self.modes
+        prominence = self.prominence
+        located = prominence >= SEPARATION
+        best = int(np.argmax(prominence))
+        gain = float(self.gains[best])
+        catalogue = float(decision.observed.catalogue[0])
+        why, threshold = "", float("nan")
+        if not decision.significant:
+            why = "the calibrated decision does not fire"
+        elif not located.any():
+            why = (
+                "no frequency is located: no column gains more than a mode at either end of "
+                f"its grid by {SEPARATION:g}"
+            )
+        elif gain < catalogue + SEPARATION:
+            why = (
+                f"its gain Δχ² {gain:.4g} does not exceed the catalogue's best "
+                f"({catalogue:.4g}) by {SEPARATION:g}"
+            )
+        else:
+            threshold = self.threshold()
+            if gain <= threshold:
+                why = f"its gain Δχ² {gain:.4g} is below its calibrated threshold {threshold:.3g}"
+        ratio = float(modes.ratios[best])
+        return SecondMode(
+            named=not why,
+            mechanism=modes.mechanisms[best],
+            ratio=ratio,
+            frequency_hz=ratio * modes.first_frequency_hz,
+            first_frequency_hz=modes.first_frequency_hz,
+            share=self.share(best),
+            gain=gain,
+            threshold=threshold,
+            catalogue_gain=catalogue,
+            where=self.where(best),
+            why=why,
+        )
+
+    def coefficient(self, index: int) -> float:
+        """The linearised fit of column ``index``: ``g⊥ᵀz / |g⊥|²`` per unit of its
+        physical coefficient."""
+        norm = float(np.linalg.norm(self.projected[:, index]))
+        scale = self.modes.scale[index]
+        return float(self.scores[index] / norm / scale) if norm > 0 else 0.0
+
+    def amplitudes(self, index: int) -> np.ndarray:
+        """The second mode's amplitude at the levels (``|q|`` through the joint, ``|κ| a²/
+        (2|D₂|)`` through the coupling, at the sensor for the harmonic column, ``|c| I a/
+        |D₂|`` seen at the sensor), moving at :meth:`ModeColumns.harmonic`."""
+        modes, theta = self.modes, self.coefficient(index)
+        mechanism, h = modes.mechanisms[index], modes.harmonic(index)
+        operator = modes.linear_operator(index, h)
+        if mechanism == JOINT:  # |q| = b |N| a / |D₂(ω)|, b = √b²
+            force = np.sqrt(max(theta, 0.0)) * modes.joint_force
+            return np.abs(force * modes.levels_m / operator)
+        if mechanism == SENSOR:  # driven by the base, A = I a at phase resonance
+            return np.abs(theta * modes.damping_stiffness * modes.levels_m / operator)
+        coupling = np.sqrt(max(theta, 0.0)) if mechanism == COUPLING else theta
+        return np.abs(coupling * modes.levels_m**2 / (2 * operator))
+
+    def share(self, index: int) -> float:
+        """Energy share of the second mode at the top level."""
+        modes = self.modes
+        second, harmonic = self.amplitudes(index), modes.harmonic(index)
+        coefficients = np.zeros((2, 5))  # modes × (mean, cos 1, sin 1, cos 2, sin 2)
+        coefficients[0, 1] = modes.levels_m[-1]
+        coefficients[1, 2 * harmonic - 1] = second[-1]
+        omega = 2 * np.pi * modes.frequency_hz[-1]
+        modal = 2 * np.pi * modes.first_frequency_hz * np.array([1.0, modes.ratios[index]])
+        return float(energy_shares(coefficients, np.asarray(omega), modal)[1])
+
+    def where(self, index: int) -> tuple[str, ...]:
+        """Where the mode shows, in words: the participation, the damping it takes, the
+        frequency it bends, the harmonic it feeds."""
+        modes, theta = self.modes, self.coefficient(index)
+        table = theta * modes.tables[index]
+        channels = list(self.decision.data.channels)
+        mm = 1e3 * modes.levels_m
+        second = self.amplitudes(index)
+        out = [
+            f"participation: {100 * second[-1] / modes.levels_m[-1]:.2g} % of the response "
+            f"amplitude at {mm[-1]:.2g} mm ({100 * self.share(index):.2g} % of the energy)"
+        ]
+        if modes.mechanisms[index] != HARMONIC:
+            damping = table[:, channels.index("damping_ratio")]
+            frequency = table[:, channels.index("frequency_hz")]
+            top = int(np.argmax(np.abs(damping)))
+            onset = int(np.argmax(np.abs(damping) >= 0.5 * abs(damping[top])))
+            sensor = modes.mechanisms[index] == SENSOR
+            out.append(
+                ("the measured damping moved with it" if sensor
+                 else "damping rising where the energy leaves")
+                + f": {100 * damping[top]:+.2g} %-points at {mm[top]:.2g} mm, from about "
+                f"{mm[onset]:.2g} mm"
+            )  # fmt: skip
+            j = int(np.argmax(np.abs(frequency)))
+            out.append(
+                f"the backbone pushed {'down' if frequency[j] < 0 else 'up'} by "
+                f"{abs(frequency[j]):.2g} Hz at {mm[j]:.2g} mm"
+                + (", following the damping" if sensor else ", away from the other mode")
+            )
+        else:
+            ratio = second / modes.levels_m
+            d2 = modes.linear_operator(index, 2)
+            turn = np.degrees(np.ptp(np.unwrap(np.angle(1 / d2))))
+            out.append(
+                f"the second harmonic it feeds: {100 * ratio[-1]:.2g} % of the fundamental at "
+                f"{mm[-1]:.2g} mm, its phase turning by {turn:.0f}° over the levels as 2ω "
+                f"nears {modes.ratios[index] * modes.first_frequency_hz:.4g} Hz"
+            )
+        return tuple(out)

@@ -1,0 +1,162 @@
+"""Criticism that names a missing mode (#27 item 6).
+
+* The second mode's signatures (``identification.criticism.second_mode``: the dynamic
+  stiffness a second mode adds to the first through the joint or a 1:2 quadratic coupling,
+  and the second harmonic it feeds) against the independent simulator's forced steady
+  states (``independent.decays``: its own ODE integration, no library kernel): the
+  first mode's complex dynamic stiffness ``F/X`` and the second mode's 2ω response.
+* The lab rig's ``lab-second-mode`` (a mode 5 % above the first, coupled through the joint)
+  criticised from its one-mode base model: the finding puts the mode within 5 % of the
+  truth's frequency; naming it ("explained by a second mode", #27's acceptance) is not met
+  yet (a strict xfail says so); a one-mode lab preset with a hidden catalogue effect names
+  none. Seeds are tuning seeds (the held-out counts are the bench's,
+  ``bench/criticism_second_mode.py``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from identification.criticism.config import VERDICTS, Verdict
+from identification.criticism.criticism import criticize
+from identification.criticism.second_mode import (
+    COUPLING,
+    JOINT,
+    added_stiffness,
+    fed_harmonic,
+)
+from independent.decays import ModalSystem, PotentialTerm, modal_forced_steady_state
+from independent.forces import CubicStiffness
+from studies.second_mode import campaign, second_mode_campaign
+
+F1_HZ, ZETA = 100.0, 0.02  # well damped, so the forced transient dies in a few hundred periods
+
+
+def _operator(frequency_hz: float, zeta: float, at_hz: float) -> complex:
+    w2, w = 2 * math.pi * frequency_hz, 2 * math.pi * at_hz
+    return w2**2 - w**2 + 2j * zeta * w2 * w
+
+
+def _steady(system: ModalSystem, drive_hz: float, base_m_s2: float) -> tuple[complex, complex]:
+    """Mode 1's fundamental ``X`` and mode 2's second harmonic (complex, ``Re(· e^{ihωt})``)
+    of the steady state under ``a_base = A sin ωt`` driving mode 1 alone."""
+    w = 2 * math.pi * drive_hz
+    period = 1 / drive_hz
+    fs = 64 * drive_hz
+    response = modal_forced_steady_state(
+        system, lambda t: base_m_s2 * math.sin(w * t), period, (1.0, 0.0), fs_hz=fs,
+        settle_periods=120, record_periods=4,
+    )  # fmt: skip
+    t = response.time_s
+    q = response.modal_displacement
+    x = 2 * np.mean(q[0] * np.exp(-1j * w * t))
+    z = 2 * np.mean(q[1] * np.exp(-2j * w * t))
+    # the recorded time restarts at 0 on a whole number of periods: phases are the drive's
+    return complex(x), complex(z)
+
+
+def _stiffness(x: complex, base_m_s2: float) -> complex:
+    """``F/X``: mode 1 is forced by ``−A sin ωt = Re(iA e^{iωt})``."""
+    return 1j * base_m_s2 / x
+
+
+def test_a_quadratic_coupling_adds_what_the_column_says():
+    """``κ q₁² q₂`` with mode 2 at 1.95× mode 1, driven at mode 1's frequency: the first mode's
+    dynamic stiffness changes by ``−κ² a² [1/(2 D₂(2ω)) + 1/ω₂²]`` and mode 2 answers at 2ω with
+    ``κ · fed_harmonic`` of the fundamental (phase-normalised), both within 5 % of the
+    independent simulator's (the rest: higher orders in κ)."""
+    f2, kappa, drive = 1.95 * F1_HZ, 1.2e7, F1_HZ
+    base = 16.0  # about 1 mm of mode 1
+    free = ModalSystem((F1_HZ, f2), (ZETA, ZETA))
+    coupled = ModalSystem((F1_HZ, f2), (ZETA, ZETA), couplings=(PotentialTerm(kappa, (2, 1)),))
+    x0, _ = _steady(free, drive, base)
+    x, z = _steady(coupled, drive, base)
+    a = abs(x)
+    d2 = _operator(f2, ZETA, 2 * drive)
+    measured = _stiffness(x, base) - _stiffness(x0, base)
+    rest = np.array([_operator(f2, ZETA, 0.0)])
+    expected = kappa**2 * added_stiffness(COUPLING, np.array([a]), np.array([d2]), at_rest=rest)[0]
+    assert abs(measured) > 0.02 * abs(_stiffness(x0, base))  # the effect is not negligible
+    assert abs(measured - expected) < 0.05 * abs(expected), (measured, expected)
+    harmonic = z * a / x**2  # (C₂ − iS₂)/a with the fundamental's phase taken out
+    expected_harmonic = kappa * fed_harmonic(np.array([a]), np.array([d2]))[0]
+    assert abs(harmonic - expected_harmonic) < 0.05 * abs(expected_harmonic)
+
+
+def test_a_mode_on_the_joint_adds_what_the_column_says():
+    """A cubic joint ``k₃ u³`` on ``u = q₁ + b q₂``, mode 2 at 1.05× mode 1 (b = 0.3): the
+    first mode's dynamic stiffness beyond its own cubic (measured with b = 0 and scaled to
+    the amplitude as ``a²``) is ``b² Δ`` with ``N = ¾ k₃ a²``, ``a N′ = 2N``, within 10 %."""
+    f2, b, k3, drive = 1.05 * F1_HZ, 0.3, 3e10, F1_HZ
+    base = 16.0
+    cubic = (CubicStiffness(k3),)
+    alone = ModalSystem((F1_HZ, f2), (ZETA, ZETA), joint_shape=(1.0, 0.0), joint_terms=cubic)
+    shared = ModalSystem((F1_HZ, f2), (ZETA, ZETA), joint_shape=(1.0, b), joint_terms=cubic)
+    x0, _ = _steady(alone, drive, base)
+    x, _ = _steady(shared, drive, base)
+    k0 = _operator(F1_HZ, ZETA, drive)
+    own = (_stiffness(x0, base) - k0) * (abs(x) / abs(x0)) ** 2  # the cubic at |x|
+    measured = _stiffness(x, base) - k0 - own
+    n = np.array([0.75 * k3 * abs(x) ** 2])
+    expected = (
+        b**2
+        * added_stiffness(
+            JOINT, np.array([abs(x)]), np.array([_operator(f2, ZETA, drive)]), n, 2 * n
+        )[0]
+    )
+    assert abs(measured) > 0.02 * abs(k0)
+    assert abs(measured - expected) < 0.1 * abs(expected), (measured, expected)
+
+
+def test_the_verdict_joins_the_one_list():
+    assert Verdict.SECOND_MODE == "explained by a second mode"
+    assert Verdict.SECOND_MODE in VERDICTS
+    assert [str(v) for v in VERDICTS][:5] == [
+        "nothing missing", "drift", "explained", "partly explained",
+        "not explained by the catalogue",
+    ]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def lab_second_mode():
+    """``lab-second-mode`` (tuning seed 1) criticised from its one-mode base model, and the
+    truth's second-mode frequency (1.05 × the first mode's)."""
+    measured, model, truth = campaign("lab-second-mode", 1)
+    return criticize(model, measured), truth
+
+
+def test_lab_second_mode_locates_the_second_mode(lab_second_mode):
+    """The finding's best column puts the mode within 5 % of the truth's frequency, with a
+    share between 0 and 1, and ``criticism.json`` carries it (frequency, ratio, share,
+    where, and why it was not named where it was not)."""
+    crit, truth = lab_second_mode
+    report = json.loads(crit.to_json())
+    mode = report["second_mode"]
+    assert abs(mode["frequency_hz"] - truth) <= 0.05 * truth, mode
+    assert mode["ratio"] == pytest.approx(mode["frequency_hz"] / mode["first_frequency_hz"])
+    assert 0 < mode["share"] < 1 and mode["mechanism"] == JOINT
+    assert any("damping" in w for w in mode["where"])
+    assert mode["named"] or mode["why"]
+    assert "second mode" in crit.summary()
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="#27 acceptance not met: the linearised second-mode column gains less than the "
+    "catalogue's best (microslip) column on this seed (docs/criticism.md, 'A missing mode')",
+)
+def test_lab_second_mode_is_explained_by_a_second_mode(lab_second_mode):
+    crit, _ = lab_second_mode
+    assert crit.verdict == Verdict.SECOND_MODE, crit.summary()
+
+
+def test_a_hidden_catalogue_effect_names_no_second_mode():
+    """One-mode data (cubic damping hidden from a linear-viscous base): something is missing
+    and the catalogue names it; no second mode."""
+    row = second_mode_campaign("lab-hidden-cubic-damping", 1)
+    assert row.verdict not in (Verdict.SECOND_MODE, "nothing missing"), row
+    assert row.passed
