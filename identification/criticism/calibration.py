@@ -45,6 +45,7 @@ from identification.fitting.data import FitData, Metric
 
 __all__ = [
     "ALPHA",
+    "BOOTSTRAP_BATCH",
     "GROUPS",
     "N_BOOTSTRAP",
     "Calibration",
@@ -61,7 +62,7 @@ N_BOOTSTRAP = 2000
 #: Channel groups of the adequacy checks.
 GROUPS = ("frequency_hz", "damping_ratio", "harmonics")
 #: Campaigns per batch of the bootstrap (memory: batch × p × columns floats).
-_BATCH = 250
+BOOTSTRAP_BATCH = 250
 
 
 @dataclass(frozen=True, eq=False)
@@ -437,8 +438,8 @@ def calibrate(
     start = time.perf_counter()
     rng = np.random.default_rng(seed)
     parts = []
-    for first in range(0, n_bootstrap, _BATCH):
-        residual, covariance = simulate(problem, min(_BATCH, n_bootstrap - first), rng)
+    for first in range(0, n_bootstrap, BOOTSTRAP_BATCH):
+        residual, covariance = simulate(problem, min(BOOTSTRAP_BATCH, n_bootstrap - first), rng)
         parts.append(statistics(problem, residual, covariance, observed.reference_rank))
     catalogue = np.concatenate([s.catalogue for s in parts])
     reference = np.concatenate([s.reference for s in parts])
@@ -451,9 +452,9 @@ def calibrate(
     if np.any(problem.metric.covariance.floor > 0):
         # The same campaigns less the floors' draw: how often such a campaign fires.
         fired = 0
-        for first in range(0, n_bootstrap, _BATCH):
+        for first in range(0, n_bootstrap, BOOTSTRAP_BATCH):
             residual, covariance = simulate(
-                problem, min(_BATCH, n_bootstrap - first), rng, systematic=False
+                problem, min(BOOTSTRAP_BATCH, n_bootstrap - first), rng, systematic=False
             )
             quiet = statistics(problem, residual, covariance, observed.reference_rank)
             fires = (quiet.catalogue > catalogue_threshold) | (

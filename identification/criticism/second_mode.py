@@ -423,8 +423,8 @@ class _Search:
         calibration = decision.calibration
         rng = np.random.default_rng(calibration.seed)
         largest = []
-        for first in range(0, calibration.n_bootstrap, cal._BATCH):
-            n = min(cal._BATCH, calibration.n_bootstrap - first)
+        for first in range(0, calibration.n_bootstrap, cal.BOOTSTRAP_BATCH):
+            n = min(cal.BOOTSTRAP_BATCH, calibration.n_bootstrap - first)
             residual, covariance = cal.simulate(decision.problem, n, rng)
             stats = cal.statistics(problem, residual, covariance,
                                    decision.observed.reference_rank)  # fmt: skip
