@@ -7,6 +7,7 @@ can run it beside them: it is among the longest checks of the suite.
 """
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -34,6 +35,18 @@ def _without_clock(report):
     if isinstance(report, list):
         return [_without_clock(v) for v in report]
     return report
+
+
+def _same_up_to_rounding(a, b, rel: float = 1e-6) -> bool:
+    """Equal structure and strings, floats within ``rel`` of each other."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same_up_to_rounding(a[k], b[k], rel) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        pairs = zip(a, b, strict=False)
+        return len(a) == len(b) and all(_same_up_to_rounding(x, y, rel) for x, y in pairs)
+    if isinstance(a, float) and isinstance(b, float):
+        return math.isclose(a, b, rel_tol=rel, abs_tol=1e-12) or (a != a and b != b)
+    return a == b
 
 
 @pytest.mark.heavy
@@ -134,8 +147,11 @@ def test_rig_campaign_through_every_stage(rig_campaign, tmp_path, capsys):
     on_dask = tmp_path / "criticism_dask"
     argv = ["criticize", str(rig_campaign), "--model", str(model), "--out", str(on_dask)]
     assert main([*argv, "--rounds", "1", "--workers", "2"]) == 0
-    assert _without_clock(json.loads((on_dask / "criticism.json").read_text())) == (
-        _without_clock(report)
+    # the same up to rounding: a refit's least squares in another process may sum in
+    # another order (BLAS threads), which moves the last digits of what follows it
+    assert _same_up_to_rounding(
+        _without_clock(json.loads((on_dask / "criticism.json").read_text())),
+        _without_clock(report),
     )
     assert capsys.readouterr().out.replace("criticism_dask", "criticism") == printed
 

@@ -126,7 +126,7 @@ def test_null_campaigns_answer_nothing_missing_at_the_calibrated_rate():
 def test_the_verdicts_are_one_list_written_as_plain_strings():
     assert [str(v) for v in VERDICTS] == [
         "nothing missing", "drift", "explained", "partly explained",
-        "not explained by the catalogue",
+        "not explained by the catalogue", "explained by a second mode",
     ]  # fmt: skip
     assert Verdict("partly explained") is Verdict.PARTLY_EXPLAINED
     assert json.dumps(Verdict.NOT_EXPLAINED) == '"not explained by the catalogue"'

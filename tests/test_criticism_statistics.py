@@ -62,6 +62,7 @@ def test_clopper_pearson_matches_the_beta_quantiles():
     assert clopper_pearson(0, 200)[0] == 0.0
 
 
+@pytest.mark.slow  # 85 s; the swap step's CI check is tests/test_criticism_terms.py's
 def test_the_swap_step_keeps_coulomb_friction_beside_the_stribeck_law_that_nests_it():
     """The swap step judging Coulomb friction that is the truth (lab base, three and five
     assemblies, round 1's runners-up as alternatives): Stribeck friction nests it (v_s → ∞),

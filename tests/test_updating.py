@@ -228,7 +228,7 @@ CALIBRATION = {
 }
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # 88 s; CI keeps test_hierarchical_model_recovers_a_small_population
 def test_hierarchical_model_is_calibrated_on_pll_campaigns():
     """Five campaigns, truths from the prior, data from the PLL simulator (not the
     single-harmonic graph the model infers with): 90 % intervals of the population

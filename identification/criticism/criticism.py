@@ -332,7 +332,10 @@ class Criticism:
         """The second-mode finding (:mod:`~identification.criticism.second_mode`): whether
         a second mode exchanging energy with this one explains the data better than the
         catalogue, its frequency, share and where it shows."""
-        return second_mode(self.decision)
+        refits = [
+            c.delta_chi2 for c in self.candidates if c.delta_chi2 is not None and not c.problems
+        ]
+        return second_mode(self.decision, max(refits, default=-np.inf))
 
     @property
     def verdict(self) -> Verdict:

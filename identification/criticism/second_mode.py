@@ -61,9 +61,11 @@ mode is named when
    quantile of the largest second-mode gain over the decision's bootstrap campaigns
    (the same campaigns, ``α'`` the level each of the decision's two tests holds:
    :attr:`Calibration.level_each`); and
-3. it exceeds the catalogue's best column gain by :data:`~.config.SEPARATION` (χ²₁, 1 %):
-   within that, the data cannot tell the mode from the catalogue's effect, and the
-   catalogue's answer stands.
+3. it exceeds the catalogue's best gain by :data:`~.config.SEPARATION` (χ²₁, 1 %) — the
+   larger of its best column's linearised gain and its best admissible refit's ``Δχ²``
+   (a catalogue effect whose refit gains more than its linearisation shows, as x² beside
+   a start's ẋ², is judged by what it does): within that, the data cannot tell the mode
+   from the catalogue's effect, and the catalogue's answer stands.
 
 On a campaign the base model explains, 1 fails with probability ``α``: no new false
 finding. The mode's frequency is the best column's, its coefficient the linearised fit
@@ -346,7 +348,7 @@ class SecondMode:
         Its best column's ``χ²`` gain and the calibrated threshold (NaN where the rule
         was decided before the bootstrap was needed).
     catalogue_gain
-        The catalogue's best column gain (what it must exceed by ``SEPARATION``).
+        The catalogue's best gain, linearised or refitted (what it must exceed by ``SEPARATION``).
     where
         Where it shows, in words (participation, damping, the harmonic it feeds).
     why
@@ -384,18 +386,32 @@ class SecondMode:
         return dataclasses.asdict(self) | {"where": list(self.where), "text": self.text}
 
 
-def second_mode(decision: Decision) -> SecondMode:
-    """The second-mode finding at ``decision`` (the rule of the module notes)."""
-    return _Search(decision).finding
+def second_mode(decision: Decision, catalogue_refit_gain: float = -np.inf) -> SecondMode:
+    """The second-mode finding at ``decision`` (the rule of the module notes).
+
+    Parameters
+    ----------
+    decision
+        The calibrated decision of the criticism.
+    catalogue_refit_gain
+        The best admissible catalogue refit's ``Δχ²`` (``-inf``: none refitted).
+
+    Returns
+    -------
+    SecondMode
+        The finding, named or with why not.
+    """
+    return _Search(decision, catalogue_refit_gain).finding
 
 
 class _Search:
     """The rule applied to one decision: observed gains first, the bootstrap only where
     the observed gains leave the answer open."""
 
-    def __init__(self, decision: Decision) -> None:
+    def __init__(self, decision: Decision, catalogue_refit_gain: float) -> None:
         self.decision = decision
         self.modes = mode_columns(decision)
+        self.catalogue_refit_gain = catalogue_refit_gain
 
     @cached_property
     def projected(self) -> np.ndarray:
@@ -451,7 +467,7 @@ class _Search:
         located = prominence >= SEPARATION
         best = int(np.argmax(prominence))
         gain = float(self.gains[best])
-        catalogue = float(decision.observed.catalogue[0])
+        catalogue = max(float(decision.observed.catalogue[0]), self.catalogue_refit_gain)
         why, threshold = "", float("nan")
         if not decision.significant:
             why = "the calibrated decision does not fire"
