@@ -25,19 +25,17 @@ import numpy as np
 import pandas as pd
 import pytest
 from scipy.interpolate import PchipInterpolator
+from two_modes import JointedTwoModes
 
-from identification.effects import CATALOGUE
 from identification.multimode import (
     Coupling,
     HarmonicSettings,
-    JointElement,
     ModalModel,
     Mode,
     nonlinear_modes,
 )
 from identification.rig import plate_shapes
 from independent.decays import ModalSystem, PotentialTerm, modal_free_decay
-from independent.forces import CubicDamping, CubicStiffness
 from pm_joint.cli import main as cli
 
 #: Among the longest files of ``make test``: handed out first (tests/conftest.py).
@@ -53,26 +51,13 @@ SHAPES = plate_shapes()[:, :2]
 NAMES = [f"p{i + 1}" for i in range(SHAPES.shape[0])]
 
 
-def _independent_system() -> ModalSystem:
-    return ModalSystem(F_HZ, ZETA, joint_shape=JOINT,
-                       joint_terms=(CubicStiffness(K3), CubicDamping(C3)),
-                       couplings=(PotentialTerm(KAPPA, (2, 1)),))  # fmt: skip
-
-
-def _model() -> ModalModel:
-    return ModalModel(
-        modes=tuple(Mode(f, z, 1.0) for f, z in zip(F_HZ, ZETA, strict=True)),
-        joint_shapes=(JOINT,),
-        elements=(JointElement(CATALOGUE["cubic_stiffness"].name, K3),
-                  JointElement(CATALOGUE["cubic_damping"].name, C3)),
-        couplings=(Coupling(1, (1, 1), 2 * KAPPA), Coupling(2, (2, 0), KAPPA)),
-    )  # fmt: skip
+TRUTH = JointedTwoModes(F_HZ, ZETA, JOINT, K3, C3, KAPPA)
 
 
 def _write_decay(folder, mode: int, amplitude_m: float, seed: int):
     q0 = np.zeros(2)
     q0[mode - 1] = amplitude_m
-    decay = modal_free_decay(_independent_system(), q0, sensor_shapes=SHAPES, duration_s=1.5,
+    decay = modal_free_decay(TRUTH.system(), q0, sensor_shapes=SHAPES, duration_s=1.5,
                              time_digits=7)  # fmt: skip
     rng = np.random.default_rng(seed)
     velocity = decay.velocity_m_s + rng.normal(0.0, NOISE_M_S, decay.velocity_m_s.shape)
@@ -102,7 +87,7 @@ def test_decay_backbones_follow_the_nonlinear_modes(tmp_path, mode, amplitude_m)
     reference = np.abs(SHAPES[:, mode - 1]).max()  # the table's amplitudes: at that sensor
     a_m = mine["amplitude_mm"].to_numpy() / 1e3 / reference
     grid = np.geomspace(0.5 * a_m.min(), 1.2 * a_m.max(), 40)
-    truth = nonlinear_modes(_model(), grid, mode=mode, settings=HarmonicSettings(harmonics=5))
+    truth = nonlinear_modes(TRUTH.model(), grid, mode=mode, settings=HarmonicSettings(harmonics=5))
     assert truth.converged.all()
     frequency = PchipInterpolator(np.log(grid), truth.frequency_hz)(np.log(a_m))
     damping = PchipInterpolator(np.log(grid), truth.damping_ratio)(np.log(a_m))

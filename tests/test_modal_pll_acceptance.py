@@ -27,19 +27,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from two_modes import JointedTwoModes
 
-from identification.effects import CATALOGUE
-from identification.multimode import (
-    Coupling,
-    HarmonicSettings,
-    JointElement,
-    ModalModel,
-    Mode,
-    phase_resonance,
-)
+from identification.multimode import HarmonicSettings, phase_resonance
 from identification.rig import plate_shapes
-from independent.decays import ModalSystem, PotentialTerm, modal_forced_steady_state
-from independent.forces import CubicDamping, CubicStiffness
+from independent.decays import ModalSystem, modal_forced_steady_state
 from independent.modal_pll import LabNoise, LoopSettings, pll_record, write_trc_campaign
 from independent.modal_resonance import ShakerDistortion, modal_phase_resonance
 from pm_joint.cli import main as cli
@@ -57,10 +49,11 @@ SHAPES = plate_shapes()[:, :2]
 HOLD_S = {1: 3.5, 2: 2.0}
 
 
+TRUTH = JointedTwoModes(F_HZ, ZETA, JOINT, K3, C3, KAPPA)
+
+
 def _system() -> ModalSystem:
-    return ModalSystem(F_HZ, ZETA, joint_shape=JOINT,
-                       joint_terms=(CubicStiffness(K3), CubicDamping(C3)),
-                       couplings=(PotentialTerm(KAPPA, (2, 1)),))  # fmt: skip
+    return TRUTH.system()
 
 
 def _truth(mode: int, amplitudes_m) -> object:
@@ -138,13 +131,7 @@ def test_the_loops_integrator_matches_dop853_open_loop():
 def test_the_independent_balance_is_the_librarys_phase_resonance():
     """A secondary check of the truth: without the shaker's harmonics the independent balance
     and the library's agree on both modes' backbones and participation."""
-    model = ModalModel(
-        modes=tuple(Mode(f, z, 1.0) for f, z in zip(F_HZ, ZETA, strict=True)),
-        joint_shapes=(JOINT,),
-        elements=(JointElement(CATALOGUE["cubic_stiffness"].name, K3),
-                  JointElement(CATALOGUE["cubic_damping"].name, C3)),
-        couplings=(Coupling(1, (1, 1), 2 * KAPPA), Coupling(2, (2, 0), KAPPA)),
-    )  # fmt: skip
+    model = TRUTH.model()
     for mode, amplitudes in ((1, np.geomspace(1e-4, 1.2e-3, 4)), (2, np.geomspace(5e-5, 6e-4, 4))):
         mine = modal_phase_resonance(_system(), mode, amplitudes)
         library = phase_resonance(model, amplitudes, mode=mode,
