@@ -2,7 +2,7 @@
 
 The structure is a :class:`~identification.multimode.model.ModalModel`, advanced by
 the N-mode PLL simulator's modal equations and RK4 step
-(:func:`identification.multimode.pll.kernel._accelerations` and ``_advance``: joint
+(:func:`identification.multimode.pll.kernel.accelerations` and ``advance``: joint
 elements on joint coordinates built from the modes, polynomial modal couplings,
 Jenkins anchors moved after each sub-step). Around it runs the lab rig's loop
 (:mod:`identification.rig.lab`, whose conventions hold unchanged): the base
@@ -30,12 +30,12 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from identification.analytical.pll.closed_loop import _N_SUB
 from identification.analytical.pll.config import PLLConfig
+from identification.analytical.pll.loop import N_SUB
 from identification.multimode.balance import modal_arrays
 from identification.multimode.model import ModalModel
 from identification.multimode.pll.closed_loop import _control, _kernel_arrays
-from identification.multimode.pll.kernel import _ACC, _N_WORK, _V, _X, _accelerations, _advance
+from identification.multimode.pll.kernel import ACC, N_WORK, V, X, accelerations, advance
 from identification.rig.conditions import Controller, Drift, Shaker
 from identification.rig.lab import _coil, _demodulate, _ramp, _wrap
 
@@ -102,7 +102,7 @@ def _modal_lab_kernel(modal0, shapes, el_int, el_float, cp_int, cp_coef, weights
     n = modal0.shape[0]
     n_channels = len(CHANNELS)
     modal = modal0.copy()
-    work = np.zeros((_N_WORK, n))
+    work = np.zeros((N_WORK, n))
     xa = np.zeros(el_int.shape[0])
     fa = np.zeros(el_int.shape[0])
     forcing = np.empty(3)
@@ -128,13 +128,13 @@ def _modal_lab_kernel(modal0, shapes, el_int, el_float, cp_int, cp_coef, weights
         gain = gain0 + (gain1 - gain0) * fraction
         amplitude = _ramp(a_from, a_to, in_hold, ramp)
         a_base = _coil(amplitude, theta, distortion) - centring * vb
-        _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V, xa, fa,
-                       a_base, _ACC)  # fmt: skip
+        accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, X, V, xa, fa,
+                       a_base, ACC)  # fmt: skip
         relative = 0.0
         for m in range(n):
-            if not (abs(work[_X, m]) <= x_max and np.isfinite(work[_ACC, m])):
+            if not (abs(work[X, m]) <= x_max and np.isfinite(work[ACC, m])):
                 return k
-            relative += weights[m] * work[_V, m]
+            relative += weights[m] * work[V, m]
 
         # What the sensors deliver to the controller.
         panel_gain = gain if gain_on_panel else 1.0
@@ -161,8 +161,8 @@ def _modal_lab_kernel(modal0, shapes, el_int, el_float, cp_int, cp_coef, weights
         out[4, k] = amplitude
         out[5, k] = np.degrees(error)
         for m in range(n):
-            out[n_channels + m, k] = work[_X, m]
-            out[n_channels + n + m, k] = work[_V, m]
+            out[n_channels + m, k] = work[X, m]
+            out[n_channels + n + m, k] = work[V, m]
 
         # One RK4 sub-step at a time: the base velocity (centred) is a state of its own,
         # so the modal equations' excitation at each stage is its stage derivative.
@@ -177,10 +177,10 @@ def _modal_lab_kernel(modal0, shapes, el_int, el_float, cp_int, cp_coef, weights
             k3 = coils[1] - centring * (vb + 0.5 * h * k2)
             k4 = coils[2] - centring * (vb + h * k3)
             if j > 0:
-                _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V,
-                               xa, fa, k1, _ACC)  # fmt: skip
+                accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, X, V,
+                               xa, fa, k1, ACC)  # fmt: skip
             forcing[0], forcing[1], forcing[2] = k1, 0.5 * (k2 + k3), k4
-            _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing)
+            advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing)
             vb += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
         theta += omega * dt
     return n_total
@@ -191,7 +191,7 @@ def _structure(model: ModalModel, fs: float):
     arrays = modal_arrays(model)
     k = _kernel_arrays(arrays, None)
     control = _control(arrays, k, PLLConfig(fs=fs), 0, model.name or "modal rig")
-    return k, int(control[0, _N_SUB])
+    return k, int(control[0, N_SUB])
 
 
 def run_modal_lab(
@@ -264,22 +264,22 @@ def run_modal_lab(
 def _decay_kernel(modal, shapes, el_int, el_float, cp_int, cp_coef, n_sub, dt, out):
     """Free motion from the state in ``out[:, 0]`` (η then η̇); fills the rest of ``out``."""
     n = modal.shape[0]
-    work = np.zeros((_N_WORK, n))
+    work = np.zeros((N_WORK, n))
     xa = np.zeros(el_int.shape[0])
     fa = np.zeros(el_int.shape[0])
     forcing = np.zeros(3)
     for m in range(n):
-        work[_X, m] = out[m, 0]
-        work[_V, m] = out[n + m, 0]
+        work[X, m] = out[m, 0]
+        work[V, m] = out[n + m, 0]
     h = dt / n_sub
     for k in range(1, out.shape[1]):
         for _ in range(n_sub):
-            _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V, xa, fa,
-                           0.0, _ACC)  # fmt: skip
-            _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing)
+            accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, X, V, xa, fa,
+                           0.0, ACC)  # fmt: skip
+            advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing)
         for m in range(n):
-            out[m, k] = work[_X, m]
-            out[n + m, k] = work[_V, m]
+            out[m, k] = work[X, m]
+            out[n + m, k] = work[V, m]
 
 
 def free_decay(
