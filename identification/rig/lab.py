@@ -68,6 +68,7 @@ from numpy.typing import ArrayLike
 
 from identification.analytical.harmonic import coefficient_table, describing_sums
 from identification.analytical.pll import stable_substeps
+from identification.analytical.pll.integrator import RK4_STABLE_STEP
 from identification.effects import (
     CATALOGUE,
     LINEAR_STIFFNESS,
@@ -118,8 +119,6 @@ __all__ = [
 
 #: Catalogue terms of the first mode alone; every other term acts on the joint displacement.
 _MODAL_EFFECTS = (LINEAR_STIFFNESS, VISCOUS_DAMPING)
-#: RK4 is stable for h·|λ| up to about 2.8; keep a margin for nonlinearity.
-_RK4_STABLE_STEP = 2.0
 _GRID = (5, 3)
 
 # Settings vector of the kernel: the loop's, then the drift's stiffness.
@@ -561,7 +560,7 @@ class LabRig(Rig):
             omega2 = mode.frequency_ratio * 2 * math.pi * assembly.linear_frequency_hz
             stiffness = max(stiffness, omega2**2 + abs(mode.joint_shape) ** 2 * stiffness)
         eigenvalue = 0.5 * slope + math.sqrt(0.25 * slope**2 + abs(stiffness))
-        needed = math.ceil(eigenvalue / self.fs / _RK4_STABLE_STEP)
+        needed = math.ceil(eigenvalue / self.fs / RK4_STABLE_STEP)
         return max(1, needed, stable_substeps(assembly.model, self.fs))
 
     def run(

@@ -34,7 +34,7 @@ from identification.analytical.pll import loop as pll_loop
 from identification.analytical.pll.config import PLLConfig
 from identification.multimode.balance import modal_arrays
 from identification.multimode.model import ModalModel
-from identification.multimode.pll.closed_loop import _control, _kernel_arrays
+from identification.multimode.pll.closed_loop import kernel_arrays, modal_control
 from identification.multimode.pll.kernel import ACC, N_WORK, V, X, accelerations, advance
 from identification.rig import lab_loop
 from identification.rig.conditions import Controller, Drift, Shaker
@@ -145,8 +145,8 @@ def _modal_lab_kernel(modal0, shapes, el_int, el_float, cp_int, cp_coef, weights
 def _structure(model: ModalModel, fs: float):
     """The kernel's arrays of one model and its RK4 sub-steps per sample."""
     arrays = modal_arrays(model)
-    k = _kernel_arrays(arrays, None)
-    control = _control(arrays, k, PLLConfig(fs=fs), 0, model.name or "modal rig")
+    k = kernel_arrays(arrays, None)
+    control = modal_control(arrays, k, PLLConfig(fs=fs), 0, model.name or "modal rig")
     return k, int(control[0, pll_loop.N_SUB])
 
 

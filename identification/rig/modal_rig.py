@@ -54,7 +54,7 @@ from identification.measurements.records import (
 )
 from identification.multimode import ModalModel, nonlinear_modes, phase_resonance
 from identification.multimode.balance import modal_arrays
-from identification.multimode.pll.closed_loop import _kernel_arrays, _linearisation
+from identification.multimode.pll.closed_loop import kernel_arrays, linearisation
 from identification.multimode.solve import HarmonicSettings, ModalSolution
 from identification.rig.conditions import Controller, Drift, Sensors, Shaker
 from identification.rig.lab import measured_channels, sensor_draws
@@ -111,7 +111,7 @@ def plate_shapes(width_variation: float = 0.1) -> np.ndarray:
 def small_amplitude_frequencies_hz(model: ModalModel) -> np.ndarray:
     """Natural frequencies of ``model`` linearised at rest (joint elements' linear parts in)."""
     arrays = modal_arrays(model)
-    stiffness = _linearisation(arrays, _kernel_arrays(arrays, None))[0][0]
+    stiffness = linearisation(arrays, kernel_arrays(arrays, None))[0][0]
     return np.sqrt(np.linalg.eigvalsh(stiffness)) / (2 * np.pi)
 
 

@@ -82,9 +82,9 @@ from identification.analytical.pll.config import PLLConfig
 from identification.analytical.pll.integrator import (
     _acceleration,
     _advance,
-    _linear_coefficients,
     _substep_message,
     _substeps,
+    linear_coefficients,
 )
 from identification.analytical.pll.loop import (
     AMPLITUDE,
@@ -294,7 +294,7 @@ def _backbone(indices, coefficients, shapes, microslip, control, settings, excit
 
 def _control(table: CoefficientTable, config: PLLConfig, model: JointModel) -> np.ndarray:
     """Per-set gains, frequency range and sub-steps, ``(n_sets, N_CONTROL)``."""
-    stiffness, damping, _ = _linear_coefficients(table)
+    stiffness, damping, _ = linear_coefficients(table)
     n_sub = _substeps(table, 1.0 / config.fs)
     return loop.control_vector(
         config, stiffness, damping, n_sub, lambda n: _substep_message(model, n, config.max_substeps)

@@ -46,7 +46,7 @@ from identification.analytical.harmonic import CoefficientTable
 from identification.analytical.pll import loop
 from identification.analytical.pll.closed_loop import LoopBackbone, LoopSamples, backbone_result
 from identification.analytical.pll.config import PLLConfig
-from identification.analytical.pll.integrator import _RK4_STABLE_STEP, _linear_coefficients
+from identification.analytical.pll.integrator import RK4_STABLE_STEP, linear_coefficients
 from identification.analytical.pll.loop import (
     HARMONICS,
     N_RESULTS,
@@ -136,7 +136,7 @@ class ModalPLLResult(LoopBackbone):
 
 
 @dataclass(frozen=True)
-class _KernelArrays:
+class KernelArrays:
     """A model's arrays as the kernel takes them, leading axis the parameter set."""
 
     modal: np.ndarray  # (B, N, 3): ω², 2ζω, w
@@ -147,7 +147,7 @@ class _KernelArrays:
     cp_coef: np.ndarray  # (B, C)
 
 
-def _kernel_arrays(arrays: ModalArrays, drive: np.ndarray | None) -> _KernelArrays:
+def kernel_arrays(arrays: ModalArrays, drive: np.ndarray | None) -> KernelArrays:
     n_sets, n_modes = arrays.n_sets, arrays.n_modes
     modal = np.empty((n_sets, n_modes, 3))
     modal[..., 0] = arrays.omega**2
@@ -161,7 +161,7 @@ def _kernel_arrays(arrays: ModalArrays, drive: np.ndarray | None) -> _KernelArra
         el_float[:, e, 0] = arrays.element_coefficients[:, e]
         el_float[:, e, 1:] = effect.shape_values(**arrays.element_shapes[e])
     cp_int = np.concatenate([arrays.coupling_modes[:, None], arrays.coupling_powers], axis=1)
-    return _KernelArrays(
+    return KernelArrays(
         modal=modal,
         shapes=np.ascontiguousarray(arrays.joint_shapes),
         el_int=el_int,
@@ -171,12 +171,12 @@ def _kernel_arrays(arrays: ModalArrays, drive: np.ndarray | None) -> _KernelArra
     )
 
 
-def _linearisation(arrays: ModalArrays, k: _KernelArrays):
+def linearisation(arrays: ModalArrays, k: KernelArrays):
     """Per-set stiffness matrix, damping matrix, friction-slope matrix and Jenkins bound at rest.
 
     Each element's small-amplitude stiffness, viscous damping and damping slope are
     the one-mode integrator's (:func:`~identification.analytical.pll.integrator.
-    _linear_coefficients` of that element alone), spread over the modes by
+    linear_coefficients` of that element alone), spread over the modes by
     ``φ_j φ_jᵀ``.
     """
     stiffness = np.zeros((arrays.n_sets, arrays.n_modes, arrays.n_modes))
@@ -201,28 +201,28 @@ def _linearisation(arrays: ModalArrays, k: _KernelArrays):
                 np.array([effect.index]), c[:, None], k.el_float[:, e, None, 1:],
                 np.zeros((arrays.n_sets, 3)), False,
             )  # fmt: skip
-        k_e, d_e, s_e = _linear_coefficients(table)
+        k_e, d_e, s_e = linear_coefficients(table)
         stiffness += k_e[:, None, None] * outer
         damping += d_e[:, None, None] * outer
         slope += s_e[:, None, None] * outer
     return stiffness, damping, slope, jenkins
 
 
-def _control(
-    arrays: ModalArrays, k: _KernelArrays, config: PLLConfig, target: int, what: str
+def modal_control(
+    arrays: ModalArrays, k: KernelArrays, config: PLLConfig, target: int, what: str
 ) -> np.ndarray:
     """Per-set gains, frequency range and sub-steps, ``(n_sets, N_CONTROL)``.
 
     As the one-mode loop's: gains designed at the target mode's small-amplitude
     frequency and viscous damping (joint elements' linear parts included).
     """
-    stiffness, damping, slope, jenkins = _linearisation(arrays, k)
+    stiffness, damping, slope, jenkins = linearisation(arrays, k)
     # |λ|² ≤ ‖C‖|λ| + ‖K‖ for the linearisation λ²x + λCx + Kx = 0 (the one-mode bound
     # with matrix norms; the Jenkins spring counted once more, as there).
     norm_k = np.max(np.abs(np.linalg.eigvalsh(stiffness)), axis=1) + jenkins
     norm_c = np.max(np.abs(np.linalg.eigvalsh(slope)), axis=1)
     largest = 0.5 * norm_c + np.sqrt(0.25 * norm_c**2 + norm_k)
-    n_sub = np.maximum(1, np.ceil(largest / config.fs / _RK4_STABLE_STEP)).astype(np.int64)
+    n_sub = np.maximum(1, np.ceil(largest / config.fs / RK4_STABLE_STEP)).astype(np.int64)
 
     def too_stiff(n: int) -> str:
         return (
@@ -240,7 +240,7 @@ def _control(
 class _Setup:
     """Everything a run needs besides the levels."""
 
-    arrays: _KernelArrays
+    arrays: KernelArrays
     lock: np.ndarray
     target: int
     control: np.ndarray
@@ -283,13 +283,13 @@ def _setup(
         if drive.shape != (n,) or not np.all(np.isfinite(drive)):
             raise ValueError(f"drive must be the {n} finite shapes of the driving point")
     arrays = modal_arrays(model, parameters, names)
-    k = _kernel_arrays(arrays, drive)
+    k = kernel_arrays(arrays, drive)
     weight = k.modal[:, target, 2]
     if np.any(weight == 0.0):
         raise ValueError(f"mode {mode} is not excited (its modal excitation weight is 0)")
     if len(set(np.sign(weight))) > 1:
         raise ValueError(f"the sign of mode {mode}'s excitation weight differs between sets")
-    control = _control(arrays, k, config, target, model.name or f"{n}-mode model")
+    control = modal_control(arrays, k, config, target, model.name or f"{n}-mode model")
     loop.check_timing(config, control)
     settings = loop.settings_vector(config)
     # The one-mode settings assume the modal force −u (base excitation, Γ = 1): where
