@@ -154,22 +154,13 @@ def term_group_study(
         Number of campaigns.
     truths
         The effects ``T``, in turn.
-    curve_counts
-        Assemblies per campaign, in turn.
-    seed
-        Seed of the study.
-    progress
-        Called with each row as it is done.
-    source
-        Where the campaigns come from (:class:`~studies.driver.CampaignSource`): the lab
-        rig; the harmonic balance only as a fast unit-level check.
-    **options
-        Passed to :func:`identification.criticism.criticism.criticize`.
+    curve_counts, seed, progress, source, **options
+        As :func:`studies.swaps.swap_study`'s.
 
     Returns
     -------
     list of TermGroupRow
-        A row per campaign.
+        A row per campaign, in the order :func:`~studies.driver.run_campaigns` draws them.
     """
 
     def judge(campaign: Campaign) -> TermGroupRow:

@@ -68,6 +68,7 @@ from numpy.typing import ArrayLike
 
 from identification.analytical.harmonic import coefficient_table, describing_sums
 from identification.analytical.pll import stable_substeps
+from identification.analytical.pll.integrator import RK4_STABLE_STEP
 from identification.effects import (
     CATALOGUE,
     LINEAR_STIFFNESS,
@@ -86,6 +87,25 @@ from identification.rig.joints import (
     iwan_update,
     memoryless_joint_force,
 )
+from identification.rig.lab_loop import (
+    DELTA0,
+    DELTA1,
+    DT,
+    LOOP_CHANNELS,
+    N_LOOP_SETTINGS,
+    N_SUB,
+    OMEGA_INITIAL,
+    ORDER,
+    RAMP,
+    X_MAX,
+    LabChannels,
+    coil,
+    loop_settings,
+    ramp_level,
+    record_loop,
+    schedule,
+    track,
+)
 from identification.rig.rig import Rig, trc_channels
 
 __all__ = [
@@ -99,26 +119,17 @@ __all__ = [
 
 #: Catalogue terms of the first mode alone; every other term acts on the joint displacement.
 _MODAL_EFFECTS = (LINEAR_STIFFNESS, VISCOUS_DAMPING)
-#: RK4 is stable for h·|λ| up to about 2.8; keep a margin for nonlinearity.
-_RK4_STABLE_STEP = 2.0
 _GRID = (5, 3)
 
-# Settings vector of the kernel.
-(
-    _DT, _N_SUB, _RAMP, _HOLD, _KP, _KI, _STAGE_ALPHA, _ORDER, _BASE_REFERENCE, _TARGET,
-    _OMEGA_INITIAL, _OMEGA_LOW, _OMEGA_HIGH, _K_DRIFT, _DELTA0, _DELTA1, _GAIN0, _GAIN1,
-    _GAIN_ON_PANEL, _X_MAX, _N_SETTINGS,
-) = range(21)  # fmt: skip
+# Settings vector of the kernel: the loop's, then the drift's stiffness.
+_K_DRIFT, _N_SETTINGS = range(N_LOOP_SETTINGS, N_LOOP_SETTINGS + 2)
 # Second-mode vector: ω₂ (0: none), ζ₂, Γ₂, centre shape, joint shape.
 _OMEGA2, _ZETA2, _GAMMA2, _CENTRE2, _JOINT2 = range(5)
 # Hysteretic anchors: the Jenkins element's joint displacement and force, the Iwan sliders'
 # joint displacement.
 _JENKINS_U, _JENKINS_F, _IWAN_U = range(3)
 #: Channels the kernel records, one row each.
-CHANNELS = (
-    "x", "v", "q", "w", "base_velocity", "base_acceleration", "frequency_hz", "theta",
-    "level", "phase_error_deg",
-)  # fmt: skip
+CHANNELS = ("x", "v", "q", "w", *LOOP_CHANNELS)
 # What the controller's sensors add: centre-point noise, centre-point dropout value
 # (NaN where none), base-point-1 noise, its dropout value.
 _CENTRE_NOISE, _CENTRE_DROPOUT, _BASE_NOISE, _BASE_DROPOUT = range(4)
@@ -214,32 +225,16 @@ class LabAssembly:
 
 
 @dataclass(frozen=True, eq=False)
-class LabTimeSeries:
-    """The engine's true signals of one record (SI, ``fs`` samples per second).
-
-    ``x``, ``v`` are the first modal coordinate and its velocity, ``q``, ``w`` the
-    second mode's; ``base_velocity``, ``base_acceleration`` the true base motion;
-    ``frequency_hz`` and ``theta`` (rad, unwrapped) the oscillator; ``level`` the
-    coil-acceleration amplitude ``A(t)`` (m/s²); ``phase_error_deg`` what the
-    controller measured. ``completed`` is False when the run diverged (NaN from there).
+class LabTimeSeries(LabChannels):
+    """The engine's true signals of one record: the loop's
+    (:class:`~identification.rig.lab_loop.LabChannels`) and the structure's, ``x``, ``v``
+    the first modal coordinate and its velocity, ``q``, ``w`` the second mode's.
     """
 
-    fs: float
-    completed: bool
     x: np.ndarray
     v: np.ndarray
     q: np.ndarray
     w: np.ndarray
-    base_velocity: np.ndarray
-    base_acceleration: np.ndarray
-    frequency_hz: np.ndarray
-    theta: np.ndarray
-    level: np.ndarray
-    phase_error_deg: np.ndarray
-
-    @property
-    def t(self) -> np.ndarray:
-        return np.arange(self.x.size) / self.fs
 
 
 # --------------------------------------------------------------------------
@@ -295,55 +290,17 @@ def _derivatives(structure, anchors, slider_forces, dk, x, v, q, w, vb, coil):
     return v, -f1 - a_base, w, q_acceleration - mode2[_GAMMA2] * a_base, a_base
 
 
-@numba.njit(cache=True, inline="always")
-def _coil(amplitude, theta, distortion):
-    """``A (sin θ + Σ d_k sin(kθ + ψ_k))``."""
-    total = np.sin(theta)
-    for h in range(distortion.shape[0]):
-        total += distortion[h, 1] * np.sin(distortion[h, 0] * theta + distortion[h, 2])
-    return amplitude * total
-
-
-@numba.njit(cache=True, inline="always")
-def _ramp(a_from, a_to, samples, ramp):
-    if samples >= ramp:
-        return a_to
-    return a_from + (a_to - a_from) * 0.5 * (1.0 - np.cos(np.pi * samples / ramp))
-
-
-@numba.njit(cache=True, inline="always")
-def _wrap(angle):
-    return angle - 2.0 * np.pi * np.ceil((angle - np.pi) / (2.0 * np.pi))
-
-
-@numba.njit(cache=True, inline="always")
-def _demodulate(filters, k, value, alpha):
-    """One sample through the ``k``-th cascade of first-order low passes; its output."""
-    for stage in range(filters.shape[1]):
-        filters[k, stage] += alpha * (value - filters[k, stage])
-        value = filters[k, stage]
-    return value
-
-
 @numba.njit(cache=True)
 def _lab_kernel(structure, distortion, coil_m_s2, settings, sensors, out):
     """Run the whole schedule; fills ``out`` (len(CHANNELS), n) and returns the samples done.
 
     ``coil_m_s2`` holds the coil-acceleration amplitude (m/s²) of each hold.
     """
-    dt = settings[_DT]
-    n_sub = int(settings[_N_SUB])
-    ramp = int(settings[_RAMP])
-    per_hold = ramp + int(settings[_HOLD])
-    kp, ki = settings[_KP], settings[_KI]
-    alpha = settings[_STAGE_ALPHA]
-    base_reference = settings[_BASE_REFERENCE] > 0.0
-    target = settings[_TARGET]
-    omega_low, omega_high = settings[_OMEGA_LOW], settings[_OMEGA_HIGH]
-    k_drift, delta0, delta1 = settings[_K_DRIFT], settings[_DELTA0], settings[_DELTA1]
-    gain0, gain1 = settings[_GAIN0], settings[_GAIN1]
-    gain_on_panel = settings[_GAIN_ON_PANEL] > 0.0
-    x_max = settings[_X_MAX]
+    dt = settings[DT]
+    n_sub = int(settings[N_SUB])
+    ramp = int(settings[RAMP])
+    k_drift, delta0, delta1 = settings[_K_DRIFT], settings[DELTA0], settings[DELTA1]
+    x_max = settings[X_MAX]
     slider_stiffness, slip_forces, mode2 = structure[7], structure[8], structure[9]
     centre2, b = mode2[_CENTRE2], mode2[_JOINT2]
 
@@ -352,90 +309,68 @@ def _lab_kernel(structure, distortion, coil_m_s2, settings, sensors, out):
     anchors = np.zeros(3)
     slider_forces = np.zeros(slider_stiffness.size)
     theta = 0.0
-    omega = settings[_OMEGA_INITIAL]
+    omega = settings[OMEGA_INITIAL]
     integral = omega
     control_on = False
     # I and Q of the response, then of the reference, each a cascade of low passes
-    filters = np.zeros((4, int(settings[_ORDER])))
-    coil = np.empty(2 * n_sub + 1)
+    filters = np.zeros((4, int(settings[ORDER])))
+    coils = np.empty(2 * n_sub + 1)
     a_from = 0.0
     h = dt / n_sub
     for n in range(n_total):
-        hold = n // per_hold
-        in_hold = n - hold * per_hold
-        if in_hold == 0 and hold > 0:
-            a_from = coil_m_s2[hold - 1]
-        a_to = coil_m_s2[hold]
-        fraction = n / max(n_total - 1, 1)
+        hold, in_hold, a_from, a_to, amplitude, fraction, panel_gain, base_gain = schedule(
+            settings, coil_m_s2, n, n_total, a_from
+        )
         delta = delta0 + (delta1 - delta0) * fraction
         dk = k_drift * ((1.0 + delta) ** 2 - 1.0)
-        gain = gain0 + (gain1 - gain0) * fraction
-        amplitude = _ramp(a_from, a_to, in_hold, ramp)
-        coil[0] = _coil(amplitude, theta, distortion)
-        d1 = _derivatives(structure, anchors, slider_forces, dk, x, v, q, w, vb, coil[0])
+        coils[0] = coil(amplitude, theta, distortion)
+        d1 = _derivatives(structure, anchors, slider_forces, dk, x, v, q, w, vb, coils[0])
         a_base = d1[4]
         if not (abs(x) <= x_max and np.isfinite(v) and np.isfinite(a_base)):
             return n
 
         # What the sensors deliver to the controller.
-        panel_gain = gain if gain_on_panel else 1.0
-        base_gain = 1.0 if gain_on_panel else gain
         centre = panel_gain * (v + centre2 * w + vb) + sensors[_CENTRE_NOISE, n]
         if not np.isnan(sensors[_CENTRE_DROPOUT, n]):
             centre = sensors[_CENTRE_DROPOUT, n]
         base = base_gain * vb + sensors[_BASE_NOISE, n]
         if not np.isnan(sensors[_BASE_DROPOUT, n]):
             base = sensors[_BASE_DROPOUT, n]
-        response = centre - base
-        s, c = np.sin(theta), np.cos(theta)
-        i_y = _demodulate(filters, 0, response * s, alpha)
-        q_y = _demodulate(filters, 1, response * c, alpha)
-        phase = np.arctan2(q_y, i_y)
-        if base_reference:
-            i_r = _demodulate(filters, 2, base * s, alpha)
-            q_r = _demodulate(filters, 3, base * c, alpha)
-            phase -= np.arctan2(q_r, i_r)
-        error = _wrap(phase - target)
-        if in_hold == ramp and hold == 0:
-            control_on = True
-        if control_on:
-            integral = min(max(integral + ki * error * dt, omega_low), omega_high)
-            omega = min(max(integral + kp * error, omega_low), omega_high)
+        error, control_on, integral, omega = track(
+            settings, filters, centre - base, base, theta, hold, in_hold, control_on, integral,
+            omega,
+        )  # fmt: skip
 
         out[0, n] = x
         out[1, n] = v
         out[2, n] = q
         out[3, n] = w
-        out[4, n] = vb
-        out[5, n] = a_base
-        out[6, n] = omega / (2.0 * np.pi)
-        out[7, n] = theta
-        out[8, n] = amplitude
-        out[9, n] = np.degrees(error)
+        record_loop(out, 4, n, vb, a_base, omega, theta, amplitude, error)
 
         # The oscillator runs at the updated frequency until the next sample.
         for j in range(1, 2 * n_sub + 1):
             part = j / (2.0 * n_sub)
-            coil[j] = _coil(
-                _ramp(a_from, a_to, in_hold + part, ramp), theta + omega * dt * part, distortion
-            )
+            coils[j] = coil(
+                ramp_level(a_from, a_to, in_hold + part, ramp), theta + omega * dt * part,
+                distortion,
+            )  # fmt: skip
         for j in range(n_sub):
             if j > 0:
                 d1 = _derivatives(
-                    structure, anchors, slider_forces, dk, x, v, q, w, vb, coil[2 * j]
+                    structure, anchors, slider_forces, dk, x, v, q, w, vb, coils[2 * j]
                 )
             half = 0.5 * h
             d2 = _derivatives(
                 structure, anchors, slider_forces, dk, x + half * d1[0], v + half * d1[1],
-                q + half * d1[2], w + half * d1[3], vb + half * d1[4], coil[2 * j + 1],
+                q + half * d1[2], w + half * d1[3], vb + half * d1[4], coils[2 * j + 1],
             )  # fmt: skip
             d3 = _derivatives(
                 structure, anchors, slider_forces, dk, x + half * d2[0], v + half * d2[1],
-                q + half * d2[2], w + half * d2[3], vb + half * d2[4], coil[2 * j + 1],
+                q + half * d2[2], w + half * d2[3], vb + half * d2[4], coils[2 * j + 1],
             )  # fmt: skip
             d4 = _derivatives(
                 structure, anchors, slider_forces, dk, x + h * d3[0], v + h * d3[1],
-                q + h * d3[2], w + h * d3[3], vb + h * d3[4], coil[2 * j + 2],
+                q + h * d3[2], w + h * d3[3], vb + h * d3[4], coils[2 * j + 2],
             )  # fmt: skip
             x += h / 6.0 * (d1[0] + 2.0 * d2[0] + 2.0 * d3[0] + d4[0])
             v += h / 6.0 * (d1[1] + 2.0 * d2[1] + 2.0 * d3[1] + d4[1])
@@ -625,7 +560,7 @@ class LabRig(Rig):
             omega2 = mode.frequency_ratio * 2 * math.pi * assembly.linear_frequency_hz
             stiffness = max(stiffness, omega2**2 + abs(mode.joint_shape) ** 2 * stiffness)
         eigenvalue = 0.5 * slope + math.sqrt(0.25 * slope**2 + abs(stiffness))
-        needed = math.ceil(eigenvalue / self.fs / _RK4_STABLE_STEP)
+        needed = math.ceil(eigenvalue / self.fs / RK4_STABLE_STEP)
         return max(1, needed, stable_substeps(assembly.model, self.fs))
 
     def run(
@@ -644,30 +579,12 @@ class LabRig(Rig):
             sensors = np.zeros((4, n))
             sensors[[_CENTRE_DROPOUT, _BASE_DROPOUT]] = np.nan
         f1 = assembly.linear_frequency_hz
-        ctrl = self.controller
-        gains = ctrl.gains(f1, assembly.damping_ratio)
-        omega_initial = 2 * math.pi * (ctrl.initial_frequency_hz or f1)
-        delta, gain = self.drift.frequency(position), self.drift.gain(position)
-        settings = np.zeros(_N_SETTINGS)
-        settings[_DT] = 1.0 / self.fs
-        settings[_N_SUB] = self._substeps(assembly)
-        settings[_RAMP], settings[_HOLD] = ramp, hold
-        settings[_KP], settings[_KI] = gains.kp, gains.ki
-        settings[_STAGE_ALPHA] = -math.expm1(-gains.stage_bandwidth / self.fs)
-        settings[_ORDER] = ctrl.detector_order
-        settings[_BASE_REFERENCE] = 1.0 if ctrl.reference == "base" else 0.0
-        # At phase resonance the relative velocity lags the base velocity by 90° and is
-        # opposite to the coil's sin θ (it is in phase with −a_base).
-        target = -0.5 * math.pi if ctrl.reference == "base" else math.pi
-        settings[_TARGET] = target + math.radians(ctrl.phase_offset_deg)
-        settings[_OMEGA_INITIAL] = omega_initial
-        settings[_OMEGA_LOW] = ctrl.frequency_limits[0] * omega_initial
-        settings[_OMEGA_HIGH] = ctrl.frequency_limits[1] * omega_initial
+        settings = loop_settings(
+            _N_SETTINGS, fs=self.fs, n_sub=self._substeps(assembly), ramp_samples=ramp,
+            hold_samples=hold, controller=self.controller, frequency_hz=f1,
+            damping_ratio=assembly.damping_ratio, drift=self.drift, position=position,
+        )  # fmt: skip
         settings[_K_DRIFT] = assembly.small_amplitude_stiffness
-        settings[_DELTA0], settings[_DELTA1] = delta
-        settings[_GAIN0], settings[_GAIN1] = gain
-        settings[_GAIN_ON_PANEL] = 1.0 if self.drift.gain_channels == "panel" else 0.0
-        settings[_X_MAX] = 0.05
         memoryless = [j for j in assembly.joints if not isinstance(j, IwanJoint)]
         iwan = [j for j in assembly.joints if isinstance(j, IwanJoint)]
         sliders = iwan[0].sliders() if iwan else (np.zeros(0), np.zeros(0))

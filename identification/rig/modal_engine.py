@@ -2,7 +2,7 @@
 
 The structure is a :class:`~identification.multimode.model.ModalModel`, advanced by
 the N-mode PLL simulator's modal equations and RK4 step
-(:func:`identification.multimode.pll.kernel._accelerations` and ``_advance``: joint
+(:func:`identification.multimode.pll.kernel.accelerations` and ``advance``: joint
 elements on joint coordinates built from the modes, polynomial modal couplings,
 Jenkins anchors moved after each sub-step). Around it runs the lab rig's loop
 (:mod:`identification.rig.lab`, whose conventions hold unchanged): the base
@@ -30,53 +30,33 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from identification.analytical.pll.closed_loop import _N_SUB
+from identification.analytical.pll import loop as pll_loop
 from identification.analytical.pll.config import PLLConfig
 from identification.multimode.balance import modal_arrays
 from identification.multimode.model import ModalModel
-from identification.multimode.pll.closed_loop import _control, _kernel_arrays
-from identification.multimode.pll.kernel import _ACC, _N_WORK, _V, _X, _accelerations, _advance
+from identification.multimode.pll.closed_loop import kernel_arrays, modal_control
+from identification.multimode.pll.kernel import ACC, N_WORK, V, X, accelerations, advance
+from identification.rig import lab_loop
 from identification.rig.conditions import Controller, Drift, Shaker
-from identification.rig.lab import _coil, _demodulate, _ramp, _wrap
 
 __all__ = ["ModalLabSeries", "free_decay", "run_modal_lab"]
 
-# Settings vector of the kernel.
-(
-    _DT, _N_SUBSTEPS, _RAMP, _HOLD, _KP, _KI, _STAGE_ALPHA, _ORDER, _BASE_REFERENCE, _TARGET,
-    _OMEGA_INITIAL, _OMEGA_LOW, _OMEGA_HIGH, _DELTA0, _DELTA1, _GAIN0, _GAIN1, _GAIN_ON_PANEL,
-    _X_MAX, _CENTRING, _WEIGHT_SUM, _N_SETTINGS,
-) = range(22)  # fmt: skip
+# Settings vector of the kernel: the loop's, then the shaker's centring and the response
+# channel's base weight.
+_CENTRING, _WEIGHT_SUM, _N_SETTINGS = range(lab_loop.N_LOOP_SETTINGS, lab_loop.N_LOOP_SETTINGS + 3)
 #: Channels recorded besides the modal coordinates and velocities (then η, η̇ of every mode).
-CHANNELS = ("base_velocity", "base_acceleration", "frequency_hz", "theta", "level",
-            "phase_error_deg")  # fmt: skip
-#: Largest modal displacement before a run counts as diverged (m).
-_X_LIMIT = 0.05
+CHANNELS = lab_loop.LOOP_CHANNELS
 
 
 @dataclass(frozen=True, eq=False)
-class ModalLabSeries:
-    """The engine's true signals of one record (SI, ``fs`` samples per second).
-
-    ``eta``, ``eta_dot`` are ``(N, n)`` modal coordinates and velocities; the other
-    channels as :class:`identification.rig.lab.LabTimeSeries`. ``completed`` is
-    False when the run diverged (NaN from there).
+class ModalLabSeries(lab_loop.LabChannels):
+    """The engine's true signals of one record: the loop's
+    (:class:`~identification.rig.lab_loop.LabChannels`) and ``eta``, ``eta_dot``, the
+    ``(N, n)`` modal coordinates and velocities.
     """
 
-    fs: float
-    completed: bool
     eta: np.ndarray
     eta_dot: np.ndarray
-    base_velocity: np.ndarray
-    base_acceleration: np.ndarray
-    frequency_hz: np.ndarray
-    theta: np.ndarray
-    level: np.ndarray
-    phase_error_deg: np.ndarray
-
-    @property
-    def t(self) -> np.ndarray:
-        return np.arange(self.eta.shape[1]) / self.fs
 
 
 @numba.njit(cache=True)
@@ -87,82 +67,58 @@ def _modal_lab_kernel(modal0, shapes, el_int, el_float, cp_int, cp_coef, weights
     ``weights`` (N,) are the modal velocities' weights in the controller's response
     channel, ``sensed`` (2, n) the noise that channel and the base channel carry.
     """
-    dt = settings[_DT]
-    n_sub = int(settings[_N_SUBSTEPS])
-    ramp = int(settings[_RAMP])
-    per_hold = ramp + int(settings[_HOLD])
-    kp, ki, alpha = settings[_KP], settings[_KI], settings[_STAGE_ALPHA]
-    base_reference = settings[_BASE_REFERENCE] > 0.0
-    target = settings[_TARGET]
-    omega_low, omega_high = settings[_OMEGA_LOW], settings[_OMEGA_HIGH]
-    delta0, delta1 = settings[_DELTA0], settings[_DELTA1]
-    gain0, gain1 = settings[_GAIN0], settings[_GAIN1]
-    gain_on_panel = settings[_GAIN_ON_PANEL] > 0.0
-    x_max, centring, weight_sum = settings[_X_MAX], settings[_CENTRING], settings[_WEIGHT_SUM]
+    dt = settings[lab_loop.DT]
+    n_sub = int(settings[lab_loop.N_SUB])
+    ramp = int(settings[lab_loop.RAMP])
+    delta0, delta1 = settings[lab_loop.DELTA0], settings[lab_loop.DELTA1]
+    x_max, centring, weight_sum = (
+        settings[lab_loop.X_MAX],
+        settings[_CENTRING],
+        settings[_WEIGHT_SUM],
+    )
     n = modal0.shape[0]
     n_channels = len(CHANNELS)
     modal = modal0.copy()
-    work = np.zeros((_N_WORK, n))
+    work = np.zeros((N_WORK, n))
     xa = np.zeros(el_int.shape[0])
     fa = np.zeros(el_int.shape[0])
     forcing = np.empty(3)
-    filters = np.zeros((4, int(settings[_ORDER])))
+    filters = np.zeros((4, int(settings[lab_loop.ORDER])))
     vb = 0.0
     theta = 0.0
-    omega = settings[_OMEGA_INITIAL]
+    omega = settings[lab_loop.OMEGA_INITIAL]
     integral = omega
     control_on = False
     a_from = 0.0
     h = dt / n_sub
     n_total = out.shape[1]
     for k in range(n_total):
-        hold = k // per_hold
-        in_hold = k - hold * per_hold
-        if in_hold == 0 and hold > 0:
-            a_from = coil_m_s2[hold - 1]
-        a_to = coil_m_s2[hold]
-        fraction = k / max(n_total - 1, 1)
+        hold, in_hold, a_from, a_to, amplitude, fraction, panel_gain, base_gain = lab_loop.schedule(
+            settings, coil_m_s2, k, n_total, a_from
+        )
         stiffening = (1.0 + delta0 + (delta1 - delta0) * fraction) ** 2
         for m in range(n):
             modal[m, 0] = modal0[m, 0] * stiffening
-        gain = gain0 + (gain1 - gain0) * fraction
-        amplitude = _ramp(a_from, a_to, in_hold, ramp)
-        a_base = _coil(amplitude, theta, distortion) - centring * vb
-        _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V, xa, fa,
-                       a_base, _ACC)  # fmt: skip
+        a_base = lab_loop.coil(amplitude, theta, distortion) - centring * vb
+        accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, X, V, xa, fa,
+                       a_base, ACC)  # fmt: skip
         relative = 0.0
         for m in range(n):
-            if not (abs(work[_X, m]) <= x_max and np.isfinite(work[_ACC, m])):
+            if not (abs(work[X, m]) <= x_max and np.isfinite(work[ACC, m])):
                 return k
-            relative += weights[m] * work[_V, m]
+            relative += weights[m] * work[V, m]
 
         # What the sensors deliver to the controller.
-        panel_gain = gain if gain_on_panel else 1.0
-        base_gain = 1.0 if gain_on_panel else gain
         base = base_gain * vb + sensed[1, k]
         response = panel_gain * (relative + weight_sum * vb) + sensed[0, k] - weight_sum * base
-        s, c = np.sin(theta), np.cos(theta)
-        phase = np.arctan2(_demodulate(filters, 1, response * c, alpha),
-                           _demodulate(filters, 0, response * s, alpha))  # fmt: skip
-        if base_reference:
-            phase -= np.arctan2(_demodulate(filters, 3, base * c, alpha),
-                                _demodulate(filters, 2, base * s, alpha))  # fmt: skip
-        error = _wrap(phase - target)
-        if in_hold == ramp and hold == 0:
-            control_on = True
-        if control_on:
-            integral = min(max(integral + ki * error * dt, omega_low), omega_high)
-            omega = min(max(integral + kp * error, omega_low), omega_high)
+        error, control_on, integral, omega = lab_loop.track(
+            settings, filters, response, base, theta, hold, in_hold, control_on, integral, omega
+        )
 
-        out[0, k] = vb
-        out[1, k] = a_base
-        out[2, k] = omega / (2.0 * np.pi)
-        out[3, k] = theta
-        out[4, k] = amplitude
-        out[5, k] = np.degrees(error)
+        lab_loop.record_loop(out, 0, k, vb, a_base, omega, theta, amplitude, error)
         for m in range(n):
-            out[n_channels + m, k] = work[_X, m]
-            out[n_channels + n + m, k] = work[_V, m]
+            out[n_channels + m, k] = work[X, m]
+            out[n_channels + n + m, k] = work[V, m]
 
         # One RK4 sub-step at a time: the base velocity (centred) is a state of its own,
         # so the modal equations' excitation at each stage is its stage derivative.
@@ -170,17 +126,17 @@ def _modal_lab_kernel(modal0, shapes, el_int, el_float, cp_int, cp_coef, weights
             coils = np.empty(3)
             for i in range(3):
                 part = (j + 0.5 * i) / n_sub
-                coils[i] = _coil(_ramp(a_from, a_to, in_hold + part, ramp),
-                                 theta + omega * dt * part, distortion)  # fmt: skip
+                level = lab_loop.ramp_level(a_from, a_to, in_hold + part, ramp)
+                coils[i] = lab_loop.coil(level, theta + omega * dt * part, distortion)
             k1 = coils[0] - centring * vb
             k2 = coils[1] - centring * (vb + 0.5 * h * k1)
             k3 = coils[1] - centring * (vb + 0.5 * h * k2)
             k4 = coils[2] - centring * (vb + h * k3)
             if j > 0:
-                _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V,
-                               xa, fa, k1, _ACC)  # fmt: skip
+                accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, X, V,
+                               xa, fa, k1, ACC)  # fmt: skip
             forcing[0], forcing[1], forcing[2] = k1, 0.5 * (k2 + k3), k4
-            _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing)
+            advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing)
             vb += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
         theta += omega * dt
     return n_total
@@ -189,9 +145,9 @@ def _modal_lab_kernel(modal0, shapes, el_int, el_float, cp_int, cp_coef, weights
 def _structure(model: ModalModel, fs: float):
     """The kernel's arrays of one model and its RK4 sub-steps per sample."""
     arrays = modal_arrays(model)
-    k = _kernel_arrays(arrays, None)
-    control = _control(arrays, k, PLLConfig(fs=fs), 0, model.name or "modal rig")
-    return k, int(control[0, _N_SUB])
+    k = kernel_arrays(arrays, None)
+    control = modal_control(arrays, k, PLLConfig(fs=fs), 0, model.name or "modal rig")
+    return k, int(control[0, pll_loop.N_SUB])
 
 
 def run_modal_lab(
@@ -223,26 +179,11 @@ def run_modal_lab(
     """
     k, n_sub = _structure(model, fs)
     n = len(coil_m_s2) * (ramp_samples + hold_samples)
-    gains = controller.gains(target_frequency_hz, target_damping_ratio)
-    omega_initial = 2 * math.pi * (controller.initial_frequency_hz or target_frequency_hz)
-    settings = np.zeros(_N_SETTINGS)
-    settings[_DT], settings[_N_SUBSTEPS] = 1.0 / fs, n_sub
-    settings[_RAMP], settings[_HOLD] = ramp_samples, hold_samples
-    settings[_KP], settings[_KI] = gains.kp, gains.ki
-    settings[_STAGE_ALPHA] = -math.expm1(-gains.stage_bandwidth / fs)
-    settings[_ORDER] = controller.detector_order
-    settings[_BASE_REFERENCE] = 1.0 if controller.reference == "base" else 0.0
-    # As on the one-mode lab rig: at phase resonance a mode's relative velocity lags
-    # the base velocity by 90° and is opposite to the coil's sin θ.
-    target = -0.5 * math.pi if controller.reference == "base" else math.pi
-    settings[_TARGET] = target + math.radians(controller.phase_offset_deg)
-    settings[_OMEGA_INITIAL] = omega_initial
-    settings[_OMEGA_LOW] = controller.frequency_limits[0] * omega_initial
-    settings[_OMEGA_HIGH] = controller.frequency_limits[1] * omega_initial
-    settings[_DELTA0], settings[_DELTA1] = drift.frequency(position)
-    settings[_GAIN0], settings[_GAIN1] = drift.gain(position)
-    settings[_GAIN_ON_PANEL] = 1.0 if drift.gain_channels == "panel" else 0.0
-    settings[_X_MAX] = _X_LIMIT
+    settings = lab_loop.loop_settings(
+        _N_SETTINGS, fs=fs, n_sub=n_sub, ramp_samples=ramp_samples, hold_samples=hold_samples,
+        controller=controller, frequency_hz=target_frequency_hz,
+        damping_ratio=target_damping_ratio, drift=drift, position=position,
+    )  # fmt: skip
     settings[_CENTRING] = 2 * math.pi * shaker.centring_hz
     settings[_WEIGHT_SUM] = weight_sum
     n_modes = model.n_modes
@@ -255,7 +196,7 @@ def run_modal_lab(
     )  # fmt: skip
     head = len(CHANNELS)
     return ModalLabSeries(
-        fs, done == n, out[head : head + n_modes], out[head + n_modes :],
+        fs, done == n, eta=out[head : head + n_modes], eta_dot=out[head + n_modes :],
         **dict(zip(CHANNELS, out[:head], strict=True)),
     )  # fmt: skip
 
@@ -264,22 +205,22 @@ def run_modal_lab(
 def _decay_kernel(modal, shapes, el_int, el_float, cp_int, cp_coef, n_sub, dt, out):
     """Free motion from the state in ``out[:, 0]`` (η then η̇); fills the rest of ``out``."""
     n = modal.shape[0]
-    work = np.zeros((_N_WORK, n))
+    work = np.zeros((N_WORK, n))
     xa = np.zeros(el_int.shape[0])
     fa = np.zeros(el_int.shape[0])
     forcing = np.zeros(3)
     for m in range(n):
-        work[_X, m] = out[m, 0]
-        work[_V, m] = out[n + m, 0]
+        work[X, m] = out[m, 0]
+        work[V, m] = out[n + m, 0]
     h = dt / n_sub
     for k in range(1, out.shape[1]):
         for _ in range(n_sub):
-            _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V, xa, fa,
-                           0.0, _ACC)  # fmt: skip
-            _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing)
+            accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, X, V, xa, fa,
+                           0.0, ACC)  # fmt: skip
+            advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing)
         for m in range(n):
-            out[m, k] = work[_X, m]
-            out[n + m, k] = work[_V, m]
+            out[m, k] = work[X, m]
+            out[n + m, k] = work[V, m]
 
 
 def free_decay(

@@ -44,7 +44,6 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from identification.artifacts import versions
 from identification.measurements.records import (
     N_BASE_POINTS,
     N_PANEL_POINTS,
@@ -55,7 +54,7 @@ from identification.measurements.records import (
 )
 from identification.multimode import ModalModel, nonlinear_modes, phase_resonance
 from identification.multimode.balance import modal_arrays
-from identification.multimode.pll.closed_loop import _kernel_arrays, _linearisation
+from identification.multimode.pll.closed_loop import kernel_arrays, linearisation
 from identification.multimode.solve import HarmonicSettings, ModalSolution
 from identification.rig.conditions import Controller, Drift, Sensors, Shaker
 from identification.rig.lab import measured_channels, sensor_draws
@@ -66,6 +65,7 @@ from identification.rig.rig import (
     first_bending_shape,
     level_steps,
     read_sidecar,
+    sidecar,
 )
 
 __all__ = [
@@ -111,7 +111,7 @@ def plate_shapes(width_variation: float = 0.1) -> np.ndarray:
 def small_amplitude_frequencies_hz(model: ModalModel) -> np.ndarray:
     """Natural frequencies of ``model`` linearised at rest (joint elements' linear parts in)."""
     arrays = modal_arrays(model)
-    stiffness = _linearisation(arrays, _kernel_arrays(arrays, None))[0][0]
+    stiffness = linearisation(arrays, kernel_arrays(arrays, None))[0][0]
     return np.sqrt(np.linalg.eigvalsh(stiffness)) / (2 * np.pi)
 
 
@@ -605,24 +605,11 @@ class ModalRig:
     _open = Rig._open
 
     def _sidecar(self, records: dict[str, Any]) -> dict[str, Any]:
-        return {
-            "format": MODAL_GROUND_TRUTH_FORMAT,
-            "version": 1,
-            "versions": versions(),
-            "rig": {
-                "name": self.name,
-                "description": self.description,
-                "nominal_model": self.model.to_dict(),
-                "test": self.test,
-                "mode": self.mode,
-                "levels_v": list(self.levels_v),
-                "amplitudes_m": list(self.amplitudes_m),
-                "shaker_gain": self.shaker_gain,
-                "noise_m_s": self.noise_m_s,
-                "hold_s": self.hold_s,
-                "ramp_s": self.ramp_s,
-                "fs": self.fs,
-                "variability": self.variability,
+        return sidecar(
+            self, MODAL_GROUND_TRUTH_FORMAT, records,
+            after_model={"test": self.test, "mode": self.mode},
+            after_levels={"amplitudes_m": list(self.amplitudes_m)},
+            rest={
                 "shapes": [list(row) for row in self.shapes],
                 "reference_points": (reference_points(self.shape_matrix) + 1).tolist(),
                 "lock_weights": lock_weights(self.shape_matrix, self.mode).tolist(),
@@ -639,8 +626,7 @@ class ModalRig:
                     "sensors": self.sensors.to_dict(),
                 },
             },
-            "records": records,
-        }
+        )  # fmt: skip
 
 
 def _ref_scale(rig: ModalRig, mode: int) -> float:

@@ -70,6 +70,7 @@ __all__ = [
     "levels_for_amplitudes",
     "read_ground_truth",
     "read_sidecar",
+    "sidecar",
     "trc_channels",
 ]
 
@@ -518,27 +519,52 @@ class Rig:
         return Campaign(folder)
 
     def _sidecar(self, records: dict[str, Any]) -> dict[str, Any]:
-        return {
-            "format": _FORMAT,
-            "version": 1,
-            "versions": versions(),
-            "rig": {
-                "name": self.name,
-                "description": self.description,
-                "nominal_model": self.model.to_dict(),
+        return sidecar(
+            self, _FORMAT, records,
+            after_model={
                 "base_model": None if self.base_model is None else self.base_model.to_dict(),
                 "hidden_effects": list(self.hidden_effects),
-                "levels_v": list(self.levels_v),
-                "shaker_gain": self.shaker_gain,
-                "noise_m_s": self.noise_m_s,
-                "hold_s": self.hold_s,
-                "ramp_s": self.ramp_s,
-                "fs": self.fs,
-                "variability": self.variability,
-                "mode_shape": list(self.mode_shape),
             },
-            "records": records,
-        }
+            after_levels={},
+            rest={"mode_shape": list(self.mode_shape)},
+        )  # fmt: skip
+
+
+def sidecar(
+    rig: Any,
+    format_name: str,
+    records: dict[str, Any],
+    *,
+    after_model: dict[str, Any],
+    after_levels: dict[str, Any],
+    rest: dict[str, Any],
+) -> dict[str, Any]:
+    """A campaign's ``ground_truth.json`` content: what every rig says of itself, and its own.
+
+    ``rig`` is a :class:`Rig` or a rig of several modes; its own entries come after
+    its nominal model, after its levels and at the end (the order the files have).
+    """
+    return {
+        "format": format_name,
+        "version": 1,
+        "versions": versions(),
+        "rig": {
+            "name": rig.name,
+            "description": rig.description,
+            "nominal_model": rig.model.to_dict(),
+            **after_model,
+            "levels_v": list(rig.levels_v),
+            **after_levels,
+            "shaker_gain": rig.shaker_gain,
+            "noise_m_s": rig.noise_m_s,
+            "hold_s": rig.hold_s,
+            "ramp_s": rig.ramp_s,
+            "fs": rig.fs,
+            "variability": rig.variability,
+            **rest,
+        },
+        "records": records,
+    }
 
 
 def _write_job(

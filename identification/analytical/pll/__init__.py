@@ -19,9 +19,10 @@ The package, one concept a module:
 :mod:`~identification.analytical.pll.open_loop`
     The response to a prescribed base acceleration (:func:`simulate_base_excitation`).
 :mod:`~identification.analytical.pll.loop`
-    The loop's numba steps, shared with the N-mode PLL
-    (:mod:`identification.multimode.pll`): excitation samples, phase detector,
-    lock detector, measurement.
+    The loop, shared with the N-mode PLL (:mod:`identification.multimode.pll`):
+    the settings, control and run-state layouts and their values from a
+    :class:`PLLConfig`, excitation samples, phase detector, controller, lock
+    detector, measurement, and the level-by-level recorded run.
 :mod:`~identification.analytical.pll.closed_loop`
     The PLL itself, its conventions (phases, detector, controller, level
     schedule, backbone point) and results (:func:`simulate_pll`,

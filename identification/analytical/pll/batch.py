@@ -20,15 +20,13 @@ from tqdm.auto import tqdm
 
 from identification.analytical.harmonic import coefficient_table
 from identification.analytical.pll.closed_loop import (
-    _N_RESULTS,
     PLLResult,
     _backbone,
-    _check_timing,
     _control,
-    _result,
-    _settings,
+    backbone_result,
 )
 from identification.analytical.pll.config import PLLConfig
+from identification.analytical.pll.loop import N_RESULTS, check_timing, settings_vector
 from identification.checks import positive_vector
 from identification.model import JointModel
 
@@ -45,11 +43,11 @@ def _backbones_parallel(
 
 
 def _chunk_out(model, excitation_m_s2, parameters, names, config, parallel) -> np.ndarray:
-    """Backbones of a chunk of parameter sets, ``(n_sets, n_levels, _N_RESULTS)``."""
+    """Backbones of a chunk of parameter sets, ``(n_sets, n_levels, N_RESULTS)``."""
     table = coefficient_table(model, parameters, names)
     control = _control(table, config, model)
-    settings = _settings(config)
-    out = np.empty((table.n_sets, excitation_m_s2.size, _N_RESULTS))
+    settings = settings_vector(config)
+    out = np.empty((table.n_sets, excitation_m_s2.size, N_RESULTS))
     arrays = (table.indices, table.coefficients, table.shapes, table.microslip)
     if parallel:
         _backbones_parallel(*arrays, control, settings, excitation_m_s2, out)
@@ -113,7 +111,7 @@ def pll_backbones(
     values = np.asarray(parameters, dtype=float)
     # Validates names and values and the stability of every set before any work is sent out.
     table = coefficient_table(model, values, names)
-    _check_timing(config, _control(table, config, model))
+    check_timing(config, _control(table, config, model))
     n_sets = table.n_sets
     if chunk_size is None:
         chunk_size = max(1, math.ceil(n_sets / (8 * numba.get_num_threads())))
@@ -137,4 +135,4 @@ def pll_backbones(
             for future, chunk in zip(futures, chunks, strict=True):
                 outs.append(future.result())
                 bar.update(len(chunk))
-    return _result(excitation_m_s2, np.concatenate(outs, axis=0))
+    return backbone_result(excitation_m_s2, np.concatenate(outs, axis=0))

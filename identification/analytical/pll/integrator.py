@@ -33,7 +33,7 @@ from identification.effects import (
 from identification.model import JointModel
 
 #: RK4 is stable for h·|λ| up to about 2.8 along both axes; keep a margin for nonlinearity.
-_RK4_STABLE_STEP = 2.0
+RK4_STABLE_STEP = 2.0
 
 
 @numba.njit(cache=True, inline="always")
@@ -88,7 +88,7 @@ def _advance(indices, coefficients, shapes, c_ms, k_t, f_s, x, v, xa, fa, acc0, 
 # Stability of the explicit step.
 
 
-def _linear_coefficients(table: CoefficientTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def linear_coefficients(table: CoefficientTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-set small-amplitude stiffness, viscous damping and stiffest |damping| slope."""
     coefficients, shapes = table.coefficients, table.shapes
     by_effect = {e.index: e for e in CATALOGUE.values()}
@@ -109,11 +109,11 @@ def _linear_coefficients(table: CoefficientTable) -> tuple[np.ndarray, np.ndarra
 
 def _substeps(table: CoefficientTable, dt: float) -> np.ndarray:
     """Sub-steps per sample keeping the linearised eigenvalues in RK4's stability region."""
-    stiffness, _, slope = _linear_coefficients(table)
+    stiffness, _, slope = linear_coefficients(table)
     stuck = HYSTERETIC.stuck_stiffness(table.hysteretic[:, 0], table.hysteretic_shape())
     stiffness = np.abs(stiffness) + np.abs(stuck)
     largest_eigenvalue = 0.5 * slope + np.sqrt(0.25 * slope**2 + stiffness)
-    return np.maximum(1, np.ceil(largest_eigenvalue * dt / _RK4_STABLE_STEP)).astype(np.int64)
+    return np.maximum(1, np.ceil(largest_eigenvalue * dt / RK4_STABLE_STEP)).astype(np.int64)
 
 
 def stable_substeps(model: JointModel, fs: float) -> int:

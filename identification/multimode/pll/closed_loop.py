@@ -37,42 +37,29 @@ Sensors
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from identification.analytical.harmonic import CoefficientTable
-from identification.analytical.pll.closed_loop import (
-    _AMPLITUDE,
-    _DAMPING,
-    _FREQUENCY,
-    _HARMONICS,
-    _KI,
-    _KP,
-    _LOCKED,
-    _MU,
-    _N_CONTROL,
-    _N_RESULTS,
-    _N_SUB,
-    _OMEGA_HIGH,
-    _OMEGA_INITIAL,
-    _OMEGA_LOW,
-    _PHASE_ERROR,
-    _REFERENCE,
-    _SENSING,
-    _TARGET,
-    _check_timing,
-    _settings,
-    record_levels,
+from identification.analytical.pll import loop
+from identification.analytical.pll.closed_loop import LoopBackbone, LoopSamples, backbone_result
+from identification.analytical.pll.config import PLLConfig
+from identification.analytical.pll.integrator import RK4_STABLE_STEP, linear_coefficients
+from identification.analytical.pll.loop import (
+    HARMONICS,
+    N_RESULTS,
+    OMEGA_INITIAL,
+    REFERENCE,
+    SENSING_INDEX,
+    TARGET,
 )
-from identification.analytical.pll.config import PLLConfig, _pole_placement
-from identification.analytical.pll.integrator import _RK4_STABLE_STEP, _linear_coefficients
 from identification.checks import positive_vector
 from identification.multimode.balance import ModalArrays, modal_arrays
 from identification.multimode.model import ModalModel
 from identification.multimode.pll import kernel
-from identification.multimode.pll.kernel import _N_COEFFICIENTS, CHANNELS, PARTICIPATION_HARMONICS
+from identification.multimode.pll.kernel import CHANNELS, N_COEFFICIENTS, PARTICIPATION_HARMONICS
 
 __all__ = [
     "ModalPLLResult",
@@ -83,56 +70,37 @@ __all__ = [
 
 
 @dataclass(frozen=True, eq=False)
-class ModalPLLTimeSeries:
+class ModalPLLTimeSeries(LoopSamples):
     """Samples of a virtual phase-resonance test of N modes (``fs`` Hz, SI units).
 
-    As :class:`~identification.analytical.pll.closed_loop.PLLTimeSeries`, with the
-    modal state in place of the one relative coordinate: ``eta``, ``eta_dot``,
-    ``eta_ddot`` are ``(N, n_samples)``; ``sensors`` is ``(n_sensors, n_samples)``,
-    ``y_s = Σ_m φ_sm η_m`` in the configured sensing. ``base_acceleration`` is the
-    excitation ``u`` (a force per unit modal mass when the test drives a point).
+    The loop's channels (:class:`~identification.analytical.pll.closed_loop.LoopSamples`)
+    and the modal state in place of the one relative coordinate: ``eta``,
+    ``eta_dot``, ``eta_ddot`` are ``(N, n_samples)``; ``sensors`` is
+    ``(n_sensors, n_samples)``, ``y_s = Σ_m φ_sm η_m`` in the configured sensing.
+    ``base_acceleration`` is the excitation ``u`` (a force per unit modal mass when
+    the test drives a point).
     """
 
-    fs: float
-    t: np.ndarray
     eta: np.ndarray
     eta_dot: np.ndarray
     eta_ddot: np.ndarray
     sensors: np.ndarray
-    base_acceleration: np.ndarray
-    base_velocity: np.ndarray
-    frequency_hz: np.ndarray
-    phase: np.ndarray
-    response_phase_deg: np.ndarray
-    level: np.ndarray
-    level_index: np.ndarray
-    holds: np.ndarray
-    measurements: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
-class ModalPLLResult:
+class ModalPLLResult(LoopBackbone):
     """Backbone points of the target mode and every mode's participation, per hold.
 
-    Arrays have shape ``(n_levels,)`` for one model, ``(n_sets, n_levels)`` for a
-    batch (then ``(…, N, 7)`` for ``coefficients``); unlocked levels are NaN.
+    The loop's points (:class:`~identification.analytical.pll.closed_loop.LoopBackbone`)
+    of the target mode: ``level`` is the excitation amplitude (m/s², or N/kg at a
+    driving point), ``amplitude_m`` the fundamental amplitude of the target mode's
+    coordinate ``|Q_t|`` (m), ``damping_ratio`` the power balance of the target mode
+    ``|w_t| |U| / (2 ω² |Q_t|)``, ``phase_error_deg`` that of the locked signal.
 
     Attributes
     ----------
     mode
         The target mode (from 1).
-    level
-        Excitation amplitude of each level (m/s², or N/kg at a driving point).
-    amplitude_m
-        Fundamental amplitude of the target mode's coordinate ``|Q_t|`` (m).
-    frequency_hz
-        Mean oscillator frequency over the measured periods (Hz).
-    damping_ratio
-        Power balance of the target mode, ``|w_t| |U| / (2 ω² |Q_t|)``.
-    phase_error_deg
-        Phase of the locked signal's fundamental minus its resonant target (deg).
-    locked
-        Whether the level locked and was measured.
     coefficients
         ``(…, N, 7)`` Fourier coefficients ``[C0, C1, S1, C2, S2, C3, S3]`` of every
         modal coordinate in the oscillator phase ``θ`` (m).
@@ -141,12 +109,6 @@ class ModalPLLResult:
     """
 
     mode: int
-    level: np.ndarray
-    amplitude_m: np.ndarray
-    frequency_hz: np.ndarray
-    damping_ratio: np.ndarray
-    phase_error_deg: np.ndarray
-    locked: np.ndarray
     coefficients: np.ndarray
     time_series: ModalPLLTimeSeries | None = field(default=None, repr=False)
 
@@ -174,7 +136,7 @@ class ModalPLLResult:
 
 
 @dataclass(frozen=True)
-class _KernelArrays:
+class KernelArrays:
     """A model's arrays as the kernel takes them, leading axis the parameter set."""
 
     modal: np.ndarray  # (B, N, 3): ω², 2ζω, w
@@ -185,7 +147,7 @@ class _KernelArrays:
     cp_coef: np.ndarray  # (B, C)
 
 
-def _kernel_arrays(arrays: ModalArrays, drive: np.ndarray | None) -> _KernelArrays:
+def kernel_arrays(arrays: ModalArrays, drive: np.ndarray | None) -> KernelArrays:
     n_sets, n_modes = arrays.n_sets, arrays.n_modes
     modal = np.empty((n_sets, n_modes, 3))
     modal[..., 0] = arrays.omega**2
@@ -199,7 +161,7 @@ def _kernel_arrays(arrays: ModalArrays, drive: np.ndarray | None) -> _KernelArra
         el_float[:, e, 0] = arrays.element_coefficients[:, e]
         el_float[:, e, 1:] = effect.shape_values(**arrays.element_shapes[e])
     cp_int = np.concatenate([arrays.coupling_modes[:, None], arrays.coupling_powers], axis=1)
-    return _KernelArrays(
+    return KernelArrays(
         modal=modal,
         shapes=np.ascontiguousarray(arrays.joint_shapes),
         el_int=el_int,
@@ -209,12 +171,12 @@ def _kernel_arrays(arrays: ModalArrays, drive: np.ndarray | None) -> _KernelArra
     )
 
 
-def _linearisation(arrays: ModalArrays, k: _KernelArrays):
+def linearisation(arrays: ModalArrays, k: KernelArrays):
     """Per-set stiffness matrix, damping matrix, friction-slope matrix and Jenkins bound at rest.
 
     Each element's small-amplitude stiffness, viscous damping and damping slope are
     the one-mode integrator's (:func:`~identification.analytical.pll.integrator.
-    _linear_coefficients` of that element alone), spread over the modes by
+    linear_coefficients` of that element alone), spread over the modes by
     ``φ_j φ_jᵀ``.
     """
     stiffness = np.zeros((arrays.n_sets, arrays.n_modes, arrays.n_modes))
@@ -239,68 +201,46 @@ def _linearisation(arrays: ModalArrays, k: _KernelArrays):
                 np.array([effect.index]), c[:, None], k.el_float[:, e, None, 1:],
                 np.zeros((arrays.n_sets, 3)), False,
             )  # fmt: skip
-        k_e, d_e, s_e = _linear_coefficients(table)
+        k_e, d_e, s_e = linear_coefficients(table)
         stiffness += k_e[:, None, None] * outer
         damping += d_e[:, None, None] * outer
         slope += s_e[:, None, None] * outer
     return stiffness, damping, slope, jenkins
 
 
-def _control(
-    arrays: ModalArrays, k: _KernelArrays, config: PLLConfig, target: int, what: str
+def modal_control(
+    arrays: ModalArrays, k: KernelArrays, config: PLLConfig, target: int, what: str
 ) -> np.ndarray:
-    """Per-set gains, frequency range and sub-steps, ``(n_sets, _N_CONTROL)``.
+    """Per-set gains, frequency range and sub-steps, ``(n_sets, N_CONTROL)``.
 
     As the one-mode loop's: gains designed at the target mode's small-amplitude
     frequency and viscous damping (joint elements' linear parts included).
     """
-    stiffness, damping, slope, jenkins = _linearisation(arrays, k)
-    k_t = stiffness[:, target, target]
-    with np.errstate(invalid="ignore"):
-        omega_linear = np.where(k_t > 0, np.sqrt(np.abs(k_t)), np.nan)
-    if config.initial_frequency_hz is not None:
-        omega_initial = np.full(arrays.n_sets, 2.0 * np.pi * config.initial_frequency_hz)
-    else:
-        omega_initial = omega_linear
-    control = np.zeros((arrays.n_sets, _N_CONTROL))
-    if config.gains is None:
-        omega_design = np.where(np.isfinite(omega_linear), omega_linear, omega_initial)
-        kp, ki, bandwidth = _pole_placement(
-            omega_design, 0.5 * damping[:, target, target] / omega_design, config.bandwidth_ratio
-        )
-    else:
-        kp, ki, bandwidth = config.gains.kp, config.gains.ki, config.gains.detector_bandwidth
-    control[:, _KP] = kp
-    control[:, _KI] = ki
-    control[:, _MU] = 2.0 * np.asarray(bandwidth)
-    control[:, _OMEGA_INITIAL] = omega_initial
-    control[:, _OMEGA_LOW] = config.frequency_limits[0] * omega_initial
-    control[:, _OMEGA_HIGH] = config.frequency_limits[1] * omega_initial
+    stiffness, damping, slope, jenkins = linearisation(arrays, k)
     # |λ|² ≤ ‖C‖|λ| + ‖K‖ for the linearisation λ²x + λCx + Kx = 0 (the one-mode bound
     # with matrix norms; the Jenkins spring counted once more, as there).
     norm_k = np.max(np.abs(np.linalg.eigvalsh(stiffness)), axis=1) + jenkins
     norm_c = np.max(np.abs(np.linalg.eigvalsh(slope)), axis=1)
     largest = 0.5 * norm_c + np.sqrt(0.25 * norm_c**2 + norm_k)
-    n_sub = np.maximum(1, np.ceil(largest / config.fs / _RK4_STABLE_STEP)).astype(np.int64)
-    worst = int(np.argmax(n_sub))
-    if n_sub[worst] > config.max_substeps:
-        raise ValueError(
-            ("" if arrays.n_sets == 1 else f"parameter set {worst}: ")
-            + f"model {what!r} needs {n_sub[worst]} RK4 sub-steps per sample (more than "
+    n_sub = np.maximum(1, np.ceil(largest / config.fs / RK4_STABLE_STEP)).astype(np.int64)
+
+    def too_stiff(n: int) -> str:
+        return (
+            f"model {what!r} needs {n} RK4 sub-steps per sample (more than "
             f"max_substeps = {config.max_substeps}) to stay stable: a friction coefficient "
             "over its v_reg or a Jenkins stiffness is too stiff; raise v_reg or fs"
         )
-    control[:, _N_SUB] = n_sub
-    if config.gains is None:
-        control[~np.isfinite(control[:, _KP]), _OMEGA_INITIAL] = np.nan
-    return control
+
+    return loop.control_vector(
+        config, stiffness[:, target, target], damping[:, target, target], n_sub, too_stiff
+    )
 
 
 @dataclass(frozen=True)
 class _Setup:
     """Everything a run needs besides the levels."""
 
-    arrays: _KernelArrays
+    arrays: KernelArrays
     lock: np.ndarray
     target: int
     control: np.ndarray
@@ -343,37 +283,30 @@ def _setup(
         if drive.shape != (n,) or not np.all(np.isfinite(drive)):
             raise ValueError(f"drive must be the {n} finite shapes of the driving point")
     arrays = modal_arrays(model, parameters, names)
-    k = _kernel_arrays(arrays, drive)
+    k = kernel_arrays(arrays, drive)
     weight = k.modal[:, target, 2]
     if np.any(weight == 0.0):
         raise ValueError(f"mode {mode} is not excited (its modal excitation weight is 0)")
     if len(set(np.sign(weight))) > 1:
         raise ValueError(f"the sign of mode {mode}'s excitation weight differs between sets")
-    control = _control(arrays, k, config, target, model.name or f"{n}-mode model")
-    _check_timing(config, control)
-    settings = _settings(config)
+    control = modal_control(arrays, k, config, target, model.name or f"{n}-mode model")
+    loop.check_timing(config, control)
+    settings = loop.settings_vector(config)
     # The one-mode settings assume the modal force −u (base excitation, Γ = 1): where
     # the locked signal's target weight times the excitation weight is positive, the
     # force is in phase with u, 180° from that assumption.
     if lock[target] * weight[0] > 0:
-        settings[_TARGET] -= np.pi
-        settings[_REFERENCE] -= np.pi
+        settings[TARGET] -= np.pi
+        settings[REFERENCE] -= np.pi
     return _Setup(k, lock, target, control, settings, shapes)
 
 
 def _result(mode: int, excitation: np.ndarray, out: np.ndarray, n_modes: int, series=None):
-    coefficients = out[..., _N_RESULTS:].reshape(*out.shape[:-1], n_modes, _N_COEFFICIENTS)
-    return ModalPLLResult(
-        mode=mode,
-        level=excitation,
-        amplitude_m=out[..., _AMPLITUDE].copy(),
-        frequency_hz=out[..., _FREQUENCY].copy(),
-        damping_ratio=out[..., _DAMPING].copy(),
-        phase_error_deg=out[..., _PHASE_ERROR].copy(),
-        locked=out[..., _LOCKED] > 0.0,
-        coefficients=coefficients.copy(),
-        time_series=series,
-    )
+    """The loop's backbone points of the target mode, and every mode's coefficients."""
+    points = backbone_result(excitation, out)
+    coefficients = out[..., N_RESULTS:].reshape(*out.shape[:-1], n_modes, N_COEFFICIENTS)
+    shared = {f.name: getattr(points, f.name) for f in fields(LoopBackbone)}
+    return ModalPLLResult(**shared, mode=mode, coefficients=coefficients.copy(), time_series=series)
 
 
 def simulate_modal_pll(
@@ -418,7 +351,7 @@ def simulate_modal_pll(
     args = (a.modal[0], a.shapes[0], a.el_int, a.el_float[0], a.cp_int, a.cp_coef[0], setup.lock,
             setup.target, setup.control[0], setup.settings)  # fmt: skip
     n = model.n_modes
-    out = np.empty((excitation.size, _N_RESULTS + n * _N_COEFFICIENTS))
+    out = np.empty((excitation.size, N_RESULTS + n * N_COEFFICIENTS))
     if not record:
         kernel.backbone(*args, excitation, out)
         return _result(mode, excitation, out, n)
@@ -430,19 +363,19 @@ def _recorded_run(mode, args, setup, excitation, out, fs, n_modes) -> ModalPLLRe
     settings = setup.settings
     control = setup.control[0]
     run = None
-    if control[_OMEGA_INITIAL] > 0.0:
-        state = kernel.initial_state(control[_OMEGA_INITIAL], int(settings[_HARMONICS]), n_modes,
+    if control[OMEGA_INITIAL] > 0.0:
+        state = kernel.initial_state(control[OMEGA_INITIAL], int(settings[HARMONICS]), n_modes,
                                      setup.arrays.el_int.shape[0])  # fmt: skip
 
         def run(a_from, a_to, buffer, row):
             kernel.run_level(*args, state, a_from, a_to, buffer, row)
 
     head = len(CHANNELS)
-    recorded = record_levels(run, excitation, out, head + 3 * n_modes, settings)
+    recorded = loop.record_levels(run, excitation, out, head + 3 * n_modes, settings)
     samples = recorded.samples
     eta, eta_dot, eta_ddot = (samples[head + i * n_modes : head + (i + 1) * n_modes]
                               for i in range(3))  # fmt: skip
-    sensed = (eta, eta_dot, eta_ddot)[int(settings[_SENSING])]
+    sensed = (eta, eta_dot, eta_ddot)[int(settings[SENSING_INDEX])]
     series = ModalPLLTimeSeries(
         fs=fs,
         t=np.arange(samples.shape[1]) / fs,
@@ -482,7 +415,7 @@ def modal_pll_backbones(
     setup = _setup(model, mode, sensors, lock_sensor, drive, config, parameters, names)
     a = setup.arrays
     n_sets, n = a.modal.shape[0], model.n_modes
-    out = np.empty((n_sets, excitation.size, _N_RESULTS + n * _N_COEFFICIENTS))
+    out = np.empty((n_sets, excitation.size, N_RESULTS + n * N_COEFFICIENTS))
     kernel.backbones_parallel(a.modal, a.shapes, a.el_int, a.el_float, a.cp_int, a.cp_coef,
                               setup.lock, setup.target, setup.control, setup.settings,
                               excitation, out)  # fmt: skip

@@ -41,47 +41,36 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from identification.analytical.pll import loop
 from identification.analytical.pll.loop import (
-    _DIVERGED,
-    _HARMONICS,
-    _LOCKED,
-    _MEASURE_START,
-    _N_RESULTS,
-    _OMEGA_INITIAL,
-    _clear_result,
-    _close_level,
-    _detect,
-    _excitation_samples,
-    _lock_step,
-    _loop_settings,
-    _measure_step,
-    _ramp,
-    _record_loop,
-    _wrap,
+    DIVERGED,
+    HARMONICS,
+    N_PERIODS,
+    N_RESULTS,
+    OMEGA,
+    OMEGA_INITIAL,
+    THETA,
 )
 from identification.effects import jenkins_force, memoryless_force
 
 #: Harmonics of every mode measured per hold (``[C0, C1, S1, …, C3, S3]``).
 PARTICIPATION_HARMONICS = 3
 #: Fourier coefficients per mode in a result row.
-_N_COEFFICIENTS = 2 * PARTICIPATION_HARMONICS + 1
+N_COEFFICIENTS = 2 * PARTICIPATION_HARMONICS + 1
 #: Columns of ``modal``.
 _STIFFNESS, _DAMPER, _WEIGHT = range(3)
 #: Rows of the work array: the state η, η̇, η̈, then the RK4 stages.
 (
-    _X, _V, _ACC, _ACC0, _X2, _V2, _ACC2, _X3, _V3, _ACC3, _X4, _V4, _ACC4, _N_WORK,
+    X, V, ACC, _ACC0, _X2, _V2, _ACC2, _X3, _V3, _ACC3, _X4, _V4, _ACC4, N_WORK,
 ) = range(14)  # fmt: skip
 #: Recorded channels besides the modal ones (then η, η̇, η̈ of every mode).
 CHANNELS = (
     "base_acceleration", "base_velocity", "frequency_hz", "phase", "response_phase_deg", "level",
 )  # fmt: skip
-# Layout of the per-run state vector: the oscillator and controller, the detector's
-# 1 + 2·harmonics coefficients, then η, η̇ and the anchors (x, f) of every element.
-_THETA, _OMEGA, _INTEGRAL, _CONTROL_ON, _DETECTOR = range(5)
 
 
 @numba.njit(cache=True, inline="always")
-def _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, x, v, xa, fa, u, out):
+def accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, x, v, xa, fa, u, out):
     """``work[out, m] = η̈_m`` at ``η = work[x]``, ``η̇ = work[v]`` under excitation ``u``.
 
     Rows of one 2-D work array rather than separate arrays: slicing rows in the
@@ -118,54 +107,51 @@ def _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, x, v,
 
 
 @numba.njit(cache=True, inline="always")
-def _advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing):
-    """RK4 over ``len(forcing) // 2`` sub-steps of ``h``, in place on ``work[_X], work[_V]``.
+def advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, h, forcing):
+    """RK4 over ``len(forcing) // 2`` sub-steps of ``h``, in place on ``work[X], work[V]``.
 
-    ``work[_ACC]`` holds the accelerations at the start, ``forcing[j]`` the
+    ``work[ACC]`` holds the accelerations at the start, ``forcing[j]`` the
     excitation at ``j·h/2``; the other rows of ``work`` are the stages. The anchors
     ``xa, fa`` move to the accepted state after each sub-step.
     """
     n = work.shape[1]
     for m in range(n):
-        work[_ACC0, m] = work[_ACC, m]
+        work[_ACC0, m] = work[ACC, m]
     for j in range(forcing.size // 2):
         if j > 0:
-            _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V, xa, fa,
+            accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, X, V, xa, fa,
                            forcing[2 * j], _ACC0)  # fmt: skip
         # Stages 2, 3, 4: rows (x, v, a) = _X2 + 3i, …; each from the previous
         # stage's velocity and acceleration, a half, a half and a whole step on.
         for i in range(3):
             x_row, v_row, a_row = _X2 + 3 * i, _V2 + 3 * i, _ACC2 + 3 * i
-            v_previous = _V if i == 0 else v_row - 3
+            v_previous = V if i == 0 else v_row - 3
             fraction = 1.0 if i == 2 else 0.5
             for m in range(n):
-                work[x_row, m] = work[_X, m] + fraction * h * work[v_previous, m]
-                work[v_row, m] = work[_V, m] + fraction * h * work[a_row - 3, m]
-            _accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, x_row, v_row,
+                work[x_row, m] = work[X, m] + fraction * h * work[v_previous, m]
+                work[v_row, m] = work[V, m] + fraction * h * work[a_row - 3, m]
+            accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, x_row, v_row,
                            xa, fa, forcing[2 * j + 1 + i // 2], a_row)  # fmt: skip
         for m in range(n):
-            work[_X, m] = work[_X, m] + h / 6.0 * (
-                work[_V, m] + 2.0 * work[_V2, m] + 2.0 * work[_V3, m] + work[_V4, m]
+            work[X, m] = work[X, m] + h / 6.0 * (
+                work[V, m] + 2.0 * work[_V2, m] + 2.0 * work[_V3, m] + work[_V4, m]
             )
-            work[_V, m] = work[_V, m] + h / 6.0 * (
+            work[V, m] = work[V, m] + h / 6.0 * (
                 work[_ACC0, m] + 2.0 * work[_ACC2, m] + 2.0 * work[_ACC3, m] + work[_ACC4, m]
             )
         for e in range(el_int.shape[0]):
             if el_int[e, 2]:
                 q = 0.0
                 for m in range(n):
-                    q += shapes[el_int[e, 1], m] * work[_X, m]
+                    q += shapes[el_int[e, 1], m] * work[X, m]
                 fa[e] = jenkins_force(q, xa[e], fa[e], el_float[e, 1], el_float[e, 2])
                 xa[e] = q
 
 
 @numba.njit(cache=True)
 def initial_state(omega, harmonics, n_modes, n_elements):
-    """State vector at rest: oscillator at ``omega``, detector, ``η, η̇`` and anchors zero."""
-    state = np.zeros(_DETECTOR + 1 + 2 * harmonics + 2 * n_modes + 2 * n_elements)
-    state[_OMEGA] = omega
-    state[_INTEGRAL] = omega
-    return state
+    """Run state at rest: the loop's at ``omega``, then η, η̇ and the anchors (x, f), all zero."""
+    return loop.initial_state(omega, harmonics, 2 * n_modes + 2 * n_elements)
 
 
 @numba.njit(cache=True)
@@ -175,14 +161,11 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
 
     ``lock`` (N,) weighs the modal coordinates into the locked signal, whose
     dominant mode is ``target_mode`` (from 0). Writes the
-    level's outcome into ``result`` (the one-mode row, then ``_N_COEFFICIENTS``
+    level's outcome into ``result`` (the one-mode row, then ``N_COEFFICIENTS``
     Fourier coefficients per mode) and, when ``record`` has columns, its samples
     (the rows of :data:`CHANNELS`, then ``η``, ``η̇``, ``η̈`` of every mode).
     """
-    (
-        dt, target, sensing, max_hold, ramp, n_periods, x_max, harmonics, kp, ki, mu_dt,
-        omega_low, omega_high, n_sub,
-    ) = _loop_settings(settings, control)  # fmt: skip
+    dt, sensing, x_max, ramp, max_hold, n_sub = loop.level_settings(settings, control)
     n = modal.shape[0]
     n_elements = el_int.shape[0]
     # The power balance of the target mode is |w_t||U| / (2ω²|Q_t|); during the
@@ -192,139 +175,95 @@ def run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mod
     lock_gain = weight * abs(lock[target_mode])
     recording = record.shape[1] > 0
     n_channels = len(CHANNELS)
-
-    theta, omega, integral = state[_THETA], state[_OMEGA], state[_INTEGRAL]
-    control_on = state[_CONTROL_ON] > 0.0
-    detector = state[_DETECTOR : _DETECTOR + 1 + 2 * harmonics]
-    offset = _DETECTOR + 1 + 2 * harmonics
+    detector, offset = loop.start_level(settings, state, result)
     xa = state[offset + 2 * n : offset + 2 * n + n_elements]
     fa = state[offset + 2 * n + n_elements : offset + 2 * n + 2 * n_elements]
-    work = np.empty((_N_WORK, n))
+    work = np.empty((N_WORK, n))
     for m in range(n):
-        work[_X, m] = state[offset + m]
-        work[_V, m] = state[offset + n + m]
+        work[X, m] = state[offset + m]
+        work[V, m] = state[offset + n + m]
     forcing = np.empty(2 * n_sub + 1)
     q_modes = np.zeros((n, PARTICIPATION_HARMONICS + 1), dtype=np.complex128)
-    _clear_result(result)
-
-    locked_count = 0
-    measuring = False
-    done = False
-    next_boundary = np.inf
-    magnitude_previous = -1.0
-    remaining = 0.0
-    duration = 0.0
     q_y = q_base = 0j
+    done = False
     error = np.nan
     k = 0
     while True:
-        s, c = np.sin(theta), np.cos(theta)
-        amplitude = _ramp(a_from, a_to, k, ramp)
+        theta, s, c, amplitude = loop.oscillator(state, a_from, a_to, k, ramp)
         u = amplitude * s
-        _accelerations(
-            modal, shapes, el_int, el_float, cp_int, cp_coef, work, _X, _V, xa, fa, u, _ACC
-        )
+        accelerations(modal, shapes, el_int, el_float, cp_int, cp_coef, work, X, V, xa, fa, u, ACC)
         y = 0.0
         finite = True
         for m in range(n):
             if not (
-                abs(work[_X, m]) <= x_max
-                and np.isfinite(work[_V, m])
-                and np.isfinite(work[_ACC, m])
+                abs(work[X, m]) <= x_max and np.isfinite(work[V, m]) and np.isfinite(work[ACC, m])
             ):
                 finite = False
-            y += lock[m] * work[sensing, m]  # rows _X, _V, _ACC are the sensings' order
+            y += lock[m] * work[sensing, m]  # rows X, V, ACC are the sensings' order
         if not finite:
-            result[_DIVERGED] = 1.0
+            result[DIVERGED] = 1.0
             break
-
-        phase = _detect(detector, y, s, c, harmonics, mu_dt)
-        error = _wrap(phase - target)
-
-        if control_on:
-            integral = min(max(integral + ki * error * dt, omega_low), omega_high)
-            omega = min(max(integral + kp * error, omega_low), omega_high)
-
+        phase, error, start, measuring, step, rotation, done = loop.loop_step(
+            settings, control, state, detector, result, k, y, s, c, amplitude, lock_gain
+        )
+        omega = state[OMEGA]
         if recording:
-            _record_loop(record, 0, k, u, amplitude, c, theta, omega, phase, settings)
+            loop.record_loop(record, 0, k, u, amplitude, c, theta, omega, phase, settings)
             for m in range(n):
                 for row in range(3):
                     record[n_channels + row * n + m, k] = work[row, m]
-
-        if k == ramp:
-            control_on = True
-            next_boundary = theta + 2.0 * np.pi
-        elif k > ramp and theta >= next_boundary:
-            next_boundary += 2.0 * np.pi
-            measuring, locked_count, magnitude_previous, start = _lock_step(
-                settings, control, detector, error, lock_gain, amplitude, omega,
-                magnitude_previous, measuring, locked_count,
-            )  # fmt: skip
-            if start:
-                remaining = 2.0 * np.pi * n_periods
-                duration = 0.0
-                q_y = q_base = 0j
-                q_modes[:] = 0j
-                result[_MEASURE_START] = k
+        if start:
+            q_y = q_base = 0j
+            q_modes[:] = 0j
         if measuring:
-            step, remaining, duration, rotation, done = _measure_step(
-                omega, dt, remaining, duration, c, s
-            )
             q_y += y * rotation
             q_base += u * rotation
             turn = rotation
             for m in range(n):
-                q_modes[m, 0] += work[_X, m] * step
+                q_modes[m, 0] += work[X, m] * step
             for h in range(1, PARTICIPATION_HARMONICS + 1):
                 for m in range(n):
-                    q_modes[m, h] += work[_X, m] * turn
+                    q_modes[m, h] += work[X, m] * turn
                 turn *= complex(c, -s)
 
-        _excitation_samples(forcing, u, a_from, a_to, k, ramp, theta, omega * dt)
-        _advance(
-            modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, dt / n_sub, forcing
-        )
-        theta = theta + omega * dt
+        loop.excitation_samples(forcing, u, a_from, a_to, k, ramp, theta, omega * dt)
+        advance(modal, shapes, el_int, el_float, cp_int, cp_coef, work, xa, fa, dt / n_sub, forcing)
+        state[THETA] = theta + omega * dt
         k += 1
         if done or k - ramp >= max_hold:
             break
 
-    state[_THETA], state[_OMEGA], state[_INTEGRAL] = theta, omega, integral
-    state[_CONTROL_ON] = 1.0 if control_on else 0.0
     for m in range(n):
-        state[offset + m] = work[_X, m]
-        state[offset + n + m] = work[_V, m]
-    scale = np.pi * n_periods
+        state[offset + m] = work[X, m]
+        state[offset + n + m] = work[V, m]
+    scale = np.pi * int(settings[N_PERIODS])
     if done:
         for m in range(n):
-            row = _N_RESULTS + m * _N_COEFFICIENTS
+            row = N_RESULTS + m * N_COEFFICIENTS
             result[row] = q_modes[m, 0].real / (2.0 * scale)
             for h in range(1, PARTICIPATION_HARMONICS + 1):
                 # Σ η e^{−ihθ} dθ = πn (C_h − i S_h)
                 result[row + 2 * h - 1] = q_modes[m, h].real / scale
                 result[row + 2 * h] = -q_modes[m, h].imag / scale
     amplitude_t = abs(q_modes[target_mode, 1]) / scale
-    _close_level(
-        result, k, done, amplitude_t, weight, q_base, q_y, duration, n_periods, target, error
-    )
+    loop.close_level(settings, state, result, k, done, amplitude_t, weight, q_base, q_y, error)
 
 
 @numba.njit(cache=True)
 def backbone(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mode, control,
              settings, excitation, out):  # fmt: skip
     """All levels of one parameter set; ``out`` is ``(n_levels, row size)``."""
-    out[:] = np.nan
-    out[:, _LOCKED] = 0.0
-    if not (control[_OMEGA_INITIAL] > 0.0):
+    loop.clear_levels(out)
+    if not (control[OMEGA_INITIAL] > 0.0):
         return
-    state = initial_state(control[_OMEGA_INITIAL], int(settings[_HARMONICS]), modal.shape[0],
+    state = initial_state(control[OMEGA_INITIAL], int(settings[HARMONICS]), modal.shape[0],
                           el_int.shape[0])  # fmt: skip
     record = np.empty((0, 0))
     a_from = 0.0
     for j in range(excitation.size):
         run_level(modal, shapes, el_int, el_float, cp_int, cp_coef, lock, target_mode, control,
                   settings, state, a_from, excitation[j], record, out[j])  # fmt: skip
-        if out[j, _DIVERGED] > 0.0:
+        if out[j, DIVERGED] > 0.0:
             return
         a_from = excitation[j]
 
