@@ -62,10 +62,10 @@ def test_predict_command_on_an_identified_modal_model(models, tmp_path, capsys):
 
 @pytest.mark.slow
 @pytest.mark.xfail(
-    reason="held-out rig ratio 0.513 on the fresh block 2_000_000 (bench/results/"
-    "identify_modes.json; 0.510 on 1_000_000): the residual's cross-validation does not see "
-    "the joint's nonlinear damping (microslip), which the one-mode model imitates by a "
-    "quadratic damping; a power-balance damping selection tried on tuning seeds did not help",
+    reason="one held-out assembly decides it: each rig assembly draws its own frequencies "
+    "(σ 0.25 %), and a model of other assemblies drifts in phase; the preset's nominal truth "
+    "itself reaches ratios 0.32 and 0.53 on tuning campaigns 1 and 2; over 9 held-out "
+    "assemblies the ratio is 0.488, the nominal truth's 0.436 (bench/results/identify_modes.json)",
     strict=False,
 )
 def test_two_modes_halve_the_one_mode_error_on_the_rigs_held_out_decays(tmp_path):
