@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.optimize import lsq_linear
 
 from identification.criticism.config import VERDICTS, Verdict
 from identification.criticism.criticism import criticize
@@ -28,6 +29,7 @@ from identification.criticism.second_mode import (
     JOINT,
     added_stiffness,
     fed_harmonic,
+    route_gains,
 )
 from independent.decays import ModalSystem, PotentialTerm, modal_forced_steady_state
 from independent.forces import CubicStiffness
@@ -110,6 +112,31 @@ def test_a_mode_on_the_joint_adds_what_the_column_says():
     )
     assert abs(measured) > 0.02 * abs(k0)
     assert abs(measured - expected) < 0.1 * abs(expected), (measured, expected)
+
+
+def test_a_modes_routes_are_fitted_together_as_bounded_least_squares_does():
+    """Each mode's gain, its two routes fitted together with the exchange's coefficient
+    ≥ 0 (and the other's too where it is one-sided), equals ``|z|² − min |z − Aθ|²`` from
+    scipy's bounded least squares, over random columns of both signs of correlation, a
+    silent column and a collinear pair."""
+    rng = np.random.default_rng(7)
+    p, m = 12, 8
+    columns = rng.standard_normal((p, m))
+    columns[:, 5] = 0.0  # silent (a crossed mode)
+    columns[:, 7] = -2.0 * columns[:, 6]  # collinear with its partner
+    one_sided = np.array([True, False, True, False, True, False, True, True])
+    routes = np.array([[0, 1], [2, 3], [4, 5], [6, 7], [0, 2]])
+    for _ in range(20):
+        z = rng.standard_normal(p) + columns[:, rng.integers(m)] * rng.normal(0, 3)
+        gains, coefficients = route_gains(columns, z, routes, one_sided)
+        for k, pair in enumerate(routes):
+            low = np.where(one_sided[pair], 0.0, -np.inf)
+            fit = lsq_linear(columns[:, pair], z, bounds=(low, np.inf), tol=1e-12)
+            expected = z @ z - np.sum((z - columns[:, pair] @ fit.x) ** 2)
+            assert gains[k] == pytest.approx(expected, abs=1e-8 * (1 + z @ z))
+            mine = z @ z - np.sum((z - columns[:, pair] @ coefficients[k]) ** 2)
+            assert mine == pytest.approx(gains[k], abs=1e-8 * (1 + z @ z))
+            assert np.all(coefficients[k][one_sided[pair]] >= 0)
 
 
 def test_the_verdict_joins_the_one_list():
