@@ -434,9 +434,10 @@ class SecondMode:
     named
         Whether the rule (module notes) names a second mode.
     mechanism
-        :data:`JOINT`, :data:`COUPLING` or :data:`HARMONIC`: how it exchanges energy with
-        the measured mode (the last two: one 1:2 mechanism, seen in the backbone or in the
-        second harmonic).
+        :data:`JOINT`, :data:`SENSOR`, :data:`COUPLING` or :data:`HARMONIC`: the route
+        named, the exchange (joint, coupling) where its fitted coefficient is not 0, else
+        the other of its pair (the last two: one 1:2 mechanism, seen in the backbone or in
+        the second harmonic).
     ratio, frequency_hz
         Its frequency over the first mode's, and in Hz.
     first_frequency_hz
@@ -445,8 +446,9 @@ class SecondMode:
     share
         The energy share it carries at the top level (from the linearised fit).
     gain, threshold
-        Its best column's ``χ²`` gain and the calibrated threshold (NaN where the rule
-        was decided before the bootstrap was needed).
+        Its ``χ²`` gain (its two routes fitted together, :func:`route_gains`) and the
+        calibrated threshold (NaN where the rule was decided before the bootstrap was
+        needed).
     catalogue_gain
         The catalogue's best gain, linearised or refitted (what it must exceed by ``SEPARATION``).
     where
