@@ -7,8 +7,9 @@ process, appending each row to a JSON-lines file as it finishes (a run stopped b
 intervals against #27's acceptance (≥ 27 of 30 per two-mode case, ≤ 1 of 30 on one-mode data).
 
     nice -n 10 python bench/criticism_second_mode.py --first-seed 0 --seeds 1   # tuning
-    nice -n 10 python bench/criticism_second_mode.py --first-seed 1000000 --seeds 30 \\
-        --stop-at 19:25                                                        # held out
+    nice -n 10 python bench/criticism_second_mode.py --cases "lab-second-mode,two-mode 1:2,\\
+        two-mode near 1:1" --first-seed 6000000 --seeds 10 \\
+        --rows bench/results/criticism_missing_mode_rows_block6.jsonl --stop-at 22:12  # held out
     python bench/criticism_second_mode.py --rows FILE --summary                # count only
 
 Ends with one JSON line; writes ``bench/results/criticism_missing_mode[_tuning].json``.

@@ -35,10 +35,10 @@ are compared with their distribution under the refitted model itself: a parametr
 bootstrap of whole campaigns, the covariance re-estimated on each. Something is
 missing when either gain exceeds its threshold (the two calibrated jointly, so that a
 null campaign fires either with probability ``alpha``): that alone decides
-(:attr:`Criticism.significant`). ``where()`` describes where, against its own calibrated
-bound; a finding no single level shows is **small** (:attr:`Criticism.small`: seen in
-the trend over the levels, within the scatter at each). Threshold, ``alpha`` and the
-bootstrap size come with the verdict.
+(:attr:`Criticism.significant`; a second mode's own calibrated test beside it).
+``where()`` describes where, against its own calibrated bound; a finding no single level
+shows is **small** (:attr:`Criticism.small`: seen in the trend over the levels, within
+the scatter at each). Threshold, ``alpha`` and the bootstrap size come with the verdict.
 
 **Explained, or not.** Significant candidates are refitted (nonlinear) and judged:
 admissible as physics (non-negative damping over the tested range, friction
@@ -310,7 +310,6 @@ class Criticism:
     residual = _Part("decision")
     where = _Part("decision")
     fires = _Part("decision")
-    significant = _Part("decision")
     small = _Part("decision")
     beyond_scatter = _Part("decision")
     reference = _Part("decision")
@@ -326,6 +325,12 @@ class Criticism:
     groups = _Part("grouping")
     term_trials = _Part("grouping")
     term_groups = _Part("grouping")
+
+    @property
+    def significant(self) -> bool:
+        """Something is missing: the calibrated decision fires, or a second mode is named
+        by its own calibrated test (:mod:`~identification.criticism.second_mode`)."""
+        return self.decision.significant or self.second_mode.named
 
     @cached_property
     def second_mode(self) -> SecondMode:

@@ -49,27 +49,42 @@ backbone would cross — ``ω₂`` (``ω₂/2`` at 1:2) within the backbone's fr
 widened by :data:`CROSSING_BANDWIDTHS` half-power bandwidths — gets no column: there the
 linearisation is singular, and a one-mode backbone could not pass it.
 
+**One mode, its two routes fitted together.** A mode at ``ω₂`` that shares the joint is
+also seen at the sensor and driven by the base (both at once on a real panel, and on the
+lab's and the two-mode rig's truths); a mode near ``2ω`` that a quadratic coupling feeds
+moves the backbone and the second harmonic at once. Each alone is a poor description of
+the mode: the linearised columns of one mode are fitted *together*
+(:func:`mode_routes`, :func:`route_gains`): through the joint (each weight ``w``) with
+seen at the sensor, through the coupling with the harmonic it feeds, each pair at one
+``ω₂``, by least squares in the criticism's whitened frame projected off the base model's
+directions, the exchange's coefficient (``b²``, ``κ²``) ≥ 0. A mode's gain is that fit's
+``Δχ²``: two coefficients, as a catalogue effect has its coefficient and its shape.
+
 **The rule** (fixed before the study, ``docs/criticism.md``, "A missing mode"). A second
 mode is named when
 
-1. the calibrated decision fires (:attr:`Decision.significant`: the only test that says
-   something is missing);
-2. the column whose frequency adds most — the largest *prominence*, its gain less the
-   larger of its family's two grid-end gains (where the mode is far and the column a
-   catalogue-like shape of no frequency) — locates a mode (prominence ≥
-   :data:`~.config.SEPARATION`), and its ``χ²`` gain exceeds its own threshold, the ``1 − α'``
-   quantile of the largest second-mode gain over the decision's bootstrap campaigns
-   (the same campaigns, ``α'`` the level each of the decision's two tests holds:
-   :attr:`Calibration.level_each`); and
-3. it exceeds the catalogue's best gain by :data:`~.config.SEPARATION` (χ²₁, 1 %) — the
+1. a mode's frequency is *located* — its *prominence*, its gain less the larger of its
+   family's two grid-end gains (where the mode is far and the columns catalogue-like
+   shapes of no frequency), is at least :data:`~.config.SEPARATION` — and of the located
+   modes the one that fits best (the largest gain) has a gain above its own threshold, the
+   ``1 − α'`` quantile of the largest mode gain over the decision's bootstrap campaigns
+   (the same campaigns, each whitened in its own re-estimated covariance, ``α'`` the level
+   each of the decision's two tests holds: :attr:`Calibration.level_each`); and
+2. it exceeds the catalogue's best gain by :data:`~.config.SEPARATION` (χ²₁, 1 %) — the
    larger of its best column's linearised gain and its best admissible refit's ``Δχ²``
    (a catalogue effect whose refit gains more than its linearisation shows, as x² beside
    a start's ẋ², is judged by what it does): within that, the data cannot tell the mode
    from the catalogue's effect, and the catalogue's answer stands.
 
-On a campaign the base model explains, 1 fails with probability ``α``: no new false
-finding. The mode's frequency is the best column's, its coefficient the linearised fit
-``θ̂ = g⊥ᵀz / |g⊥|²``, and from it the energy share it carries at the top level
+The decision need not fire: the mode's test is a third test on the decision's bootstrap,
+beside the catalogue's and the reference's at the level each of them holds, and aimed at
+one alternative it sees a 1:2 mode's small signature that the free-form reference spreads
+over its whole basis. On a campaign the base model explains, 1 passes with probability
+``α'``: a one-mode campaign names a mode with probability at most ``α'``, and the
+criticism (:attr:`~.criticism.Criticism.significant`) fires with at most ``α + α'``.
+The mode's frequency is the best mode's, its route named the exchange (joint or
+coupling) where that coefficient is not 0, its coefficients the joint fit's, and from them
+the energy share it carries at the top level
 (:func:`identification.multimode.solve.energy_shares`) and where it shows.
 """
 
@@ -107,6 +122,8 @@ __all__ = [
     "fed_harmonic",
     "joint_force",
     "mode_columns",
+    "mode_routes",
+    "route_gains",
     "second_mode",
 ]
 
@@ -325,6 +342,89 @@ def mode_columns(decision: Decision) -> ModeColumns:
     )  # fmt: skip
 
 
+def _whitened(
+    problem: cal.Problem, residual: np.ndarray, covariance: np.ndarray, columns: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Bootstrap campaigns' ``(B, p, M)`` columns and ``(B, p)`` residuals whitened in each
+    campaign's own covariance and projected off the base model's directions: the frame of
+    :func:`~.calibration.statistics`, for columns fitted two at a time."""
+    inverse = np.linalg.inv(np.linalg.cholesky(problem.weighted(covariance)))
+    batch, p = residual.shape
+    # one flat product: a stack of small BLAS calls costs far more in threads and overhead
+    white = np.concatenate([
+        (inverse.reshape(-1, p) @ columns).reshape(batch, p, -1),
+        np.einsum("bij,bj->bi", inverse, residual)[:, :, None],
+    ], axis=2)  # fmt: skip
+    basis, _ = np.linalg.qr(np.einsum("bij,jk->bik", inverse, problem.base))
+    projected = white - np.einsum("bik,bkm->bim", basis, np.einsum("bik,bim->bkm", basis, white))
+    return projected[:, :, :-1], projected[:, :, -1]
+
+
+def mode_routes(modes: ModeColumns) -> np.ndarray:
+    """``(K, 2)`` the columns of one mode's two routes, fitted together: through the joint
+    (each weight ``w``) with seen at the sensor, and through the quadratic coupling with
+    the second harmonic it feeds, each pair at one frequency ``ω₂``."""
+    index = {
+        (m, float(w), float(r)): i
+        for i, (m, w, r) in enumerate(zip(modes.mechanisms, modes.weights, modes.ratios,
+                                          strict=True))
+    }  # fmt: skip
+    pairs = [
+        (i, index[(SENSOR, 1.0, r)] if m == JOINT else index[(HARMONIC, 1.0, r)])
+        for (m, _, r), i in index.items()
+        if m in (JOINT, COUPLING)
+    ]
+    return np.array(pairs, dtype=int).reshape(-1, 2)
+
+
+def route_gains(
+    projected: np.ndarray, z: np.ndarray, routes: np.ndarray, one_sided: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each mode's ``χ²`` gain with its two routes' columns fitted together.
+
+    Parameters
+    ----------
+    projected
+        ``(p, M)`` the columns whitened and projected off the base model's directions.
+    z
+        ``(p,)`` the residual, whitened and projected alike.
+    routes
+        ``(K, 2)`` each mode's two columns (:func:`mode_routes`).
+    one_sided
+        ``(M,)`` whether a column's coefficient has one physical sign.
+
+    Returns
+    -------
+    gains, coefficients
+        ``(K,)`` the least-squares gain ``|z|² − min |z − θ₁g₁ − θ₂g₂|²`` with each
+        one-sided coefficient ≥ 0 (an unconstrained optimum outside is replaced by the
+        better route alone: the optimum of a concave quadratic on the boundary), and
+        ``(K, 2)`` the coefficients in the columns' own (scaled) units.
+    """
+    g1, g2 = projected[:, routes[:, 0]], projected[:, routes[:, 1]]
+    s1, s2 = one_sided[routes[:, 0]], one_sided[routes[:, 1]]
+    n11, n22, n12 = np.sum(g1 * g1, 0), np.sum(g2 * g2, 0), np.sum(g1 * g2, 0)
+    d1, d2 = g1.T @ z, g2.T @ z
+    live1, live2 = n11 > 1e-18, n22 > 1e-18
+    # each route alone (0 where silent or of the wrong sign)
+    t1 = np.where(live1 & ~(s1 & (d1 < 0)), d1 / np.where(live1, n11, 1.0), 0.0)
+    t2 = np.where(live2 & ~(s2 & (d2 < 0)), d2 / np.where(live2, n22, 1.0), 0.0)
+    alone1, alone2 = t1 * d1, t2 * d2
+    # both together, where they are not collinear and the signs are physical
+    det = n11 * n22 - n12**2
+    both = live1 & live2 & (det > 1e-9 * n11 * n22)
+    safe = np.where(both, det, 1.0)
+    b1, b2 = (n22 * d1 - n12 * d2) / safe, (n11 * d2 - n12 * d1) / safe
+    both &= ~(s1 & (b1 < 0)) & ~(s2 & (b2 < 0))
+    gains = np.where(both, b1 * d1 + b2 * d2, np.maximum(alone1, alone2))
+    first = alone1 >= alone2
+    coefficients = np.stack([
+        np.where(both, b1, np.where(first, t1, 0.0)),
+        np.where(both, b2, np.where(first, 0.0, t2)),
+    ], axis=1)  # fmt: skip
+    return gains, coefficients
+
+
 @dataclass(frozen=True)
 class SecondMode:
     """The second-mode finding of one criticism.
@@ -334,9 +434,10 @@ class SecondMode:
     named
         Whether the rule (module notes) names a second mode.
     mechanism
-        :data:`JOINT`, :data:`COUPLING` or :data:`HARMONIC`: how it exchanges energy with
-        the measured mode (the last two: one 1:2 mechanism, seen in the backbone or in the
-        second harmonic).
+        :data:`JOINT`, :data:`SENSOR`, :data:`COUPLING` or :data:`HARMONIC`: the route
+        named, the exchange (joint, coupling) where its fitted coefficient is not 0, else
+        the other of its pair (the last two: one 1:2 mechanism, seen in the backbone or in
+        the second harmonic).
     ratio, frequency_hz
         Its frequency over the first mode's, and in Hz.
     first_frequency_hz
@@ -345,8 +446,9 @@ class SecondMode:
     share
         The energy share it carries at the top level (from the linearised fit).
     gain, threshold
-        Its best column's ``χ²`` gain and the calibrated threshold (NaN where the rule
-        was decided before the bootstrap was needed).
+        Its ``χ²`` gain (its two routes fitted together, :func:`route_gains`) and the
+        calibrated threshold (NaN where the rule was decided before the bootstrap was
+        needed).
     catalogue_gain
         The catalogue's best gain, linearised or refitted (what it must exceed by ``SEPARATION``).
     where
@@ -411,6 +513,7 @@ class _Search:
     def __init__(self, decision: Decision, catalogue_refit_gain: float) -> None:
         self.decision = decision
         self.modes = mode_columns(decision)
+        self.routes = mode_routes(self.modes)
         self.catalogue_refit_gain = catalogue_refit_gain
 
     @cached_property
@@ -419,61 +522,78 @@ class _Search:
         return cal.project(self.decision.observed, self.modes.columns)
 
     @cached_property
-    def scores(self) -> np.ndarray:
-        z = self.decision.observed.frame["z"]
-        norms = np.linalg.norm(self.projected, axis=0)
-        silent = norms <= 1e-9
-        return np.where(silent, 0.0, self.projected.T @ z / np.where(silent, 1.0, norms))
+    def fit(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each mode's (route pair's) ``χ²`` gain and its two scaled coefficients."""
+        return route_gains(self.projected, self.decision.observed.frame["z"], self.routes,
+                           self.modes.one_sided)  # fmt: skip
 
-    @cached_property
+    @property
     def gains(self) -> np.ndarray:
-        return np.where(self.modes.one_sided & (self.scores < 0), 0.0, self.scores**2)
+        """``(K,)`` each mode's gain: its routes fitted together (:func:`route_gains`)."""
+        return self.fit[0]
 
     def threshold(self) -> float:
-        """The ``1 − level_each`` quantile of the largest second-mode gain over the
-        decision's own bootstrap campaigns (same seed and batches: the same campaigns)."""
+        """The ``1 − level_each`` quantile of the largest mode gain over the decision's own
+        bootstrap campaigns (same seed and batches: the same campaigns), each campaign
+        whitened in its own re-estimated covariance as the decision's statistics are."""
         decision = self.decision
-        problem = dataclasses.replace(
-            decision.problem, candidates=self.modes.columns, directions=self.modes.directions
-        )
-        calibration = decision.calibration
+        problem, calibration = decision.problem, decision.calibration
         rng = np.random.default_rng(calibration.seed)
         largest = []
         for first in range(0, calibration.n_bootstrap, cal.BOOTSTRAP_BATCH):
             n = min(cal.BOOTSTRAP_BATCH, calibration.n_bootstrap - first)
-            residual, covariance = cal.simulate(decision.problem, n, rng)
-            stats = cal.statistics(problem, residual, covariance,
-                                   decision.observed.reference_rank)  # fmt: skip
-            largest.append(stats.catalogue)  # the largest column gain: the modes' here
-        return float(np.quantile(np.concatenate(largest), 1 - calibration.level_each))
+            residual, covariance = cal.simulate(problem, n, rng)
+            projected, z = _whitened(problem, residual, covariance, self.modes.columns)
+            for b in range(n):
+                gains, _ = route_gains(projected[b], z[b], self.routes, self.modes.one_sided)
+                largest.append(float(np.max(gains, initial=0.0)))
+        return float(np.quantile(largest, 1 - calibration.level_each))
 
     @cached_property
     def prominence(self) -> np.ndarray:
-        """``(M,)`` each column's gain less the larger of its family's two grid-end gains:
+        """``(K,)`` each mode's gain less the larger of its family's two grid-end gains:
         what the mode's frequency adds. Far from the first mode a family's columns tend to
         one shape of no frequency (``N²``, ``a²``, ``I²``: a catalogue-like term), which
         says nothing of where a mode is."""
         out = np.zeros(self.gains.size)
-        families = list(zip(self.modes.mechanisms, self.modes.weights, strict=True))
+        modes, first = self.modes, self.routes[:, 0]
+        families = list(zip((modes.mechanisms[i] for i in first), modes.weights[first],
+                            strict=True))  # fmt: skip
         for family in dict.fromkeys(families):
             rows = np.flatnonzero([f == family for f in families])
             out[rows] = self.gains[rows] - max(self.gains[rows[0]], self.gains[rows[-1]])
         return out
 
     @cached_property
+    def located(self) -> np.ndarray:
+        """``(K,)`` the modes whose frequency adds at least :data:`~.config.SEPARATION`."""
+        return self.prominence >= SEPARATION
+
+    @cached_property
+    def best(self) -> int:
+        """The mode that fits best among those whose frequency is located (the one whose
+        frequency adds most where none is)."""
+        if not self.located.any():
+            return int(np.argmax(self.prominence))
+        return int(np.argmax(np.where(self.located, self.gains, -np.inf)))
+
+    @cached_property
+    def route(self) -> int:
+        """The best mode's route named: the one that exchanges energy (through the joint or
+        the coupling) where its coefficient is not 0, else the other."""
+        exchange, other = self.routes[self.best]
+        return int(exchange if self.fit[1][self.best][0] > 0 else other)
+
+    @cached_property
     def finding(self) -> SecondMode:
         decision, modes = self.decision, self.modes
-        prominence = self.prominence
-        located = prominence >= SEPARATION
-        best = int(np.argmax(prominence))
+        best, route = self.best, self.route
         gain = float(self.gains[best])
         catalogue = max(float(decision.observed.catalogue[0]), self.catalogue_refit_gain)
         why, threshold = "", float("nan")
-        if not decision.significant:
-            why = "the calibrated decision does not fire"
-        elif not located.any():
+        if not self.located.any():
             why = (
-                "no frequency is located: no column gains more than a mode at either end of "
+                "no frequency is located: no mode gains more than a mode at either end of "
                 f"its grid by {SEPARATION:g}"
             )
         elif gain < catalogue + SEPARATION:
@@ -485,27 +605,32 @@ class _Search:
             threshold = self.threshold()
             if gain <= threshold:
                 why = f"its gain Δχ² {gain:.4g} is below its calibrated threshold {threshold:.3g}"
-        ratio = float(modes.ratios[best])
+        ratio = float(modes.ratios[route])
         return SecondMode(
             named=not why,
-            mechanism=modes.mechanisms[best],
+            mechanism=modes.mechanisms[route],
             ratio=ratio,
             frequency_hz=ratio * modes.first_frequency_hz,
             first_frequency_hz=modes.first_frequency_hz,
-            share=self.share(best),
+            share=self.share(route),
             gain=gain,
             threshold=threshold,
             catalogue_gain=catalogue,
-            where=self.where(best),
+            where=self.where(route),
             why=why,
         )
 
     def coefficient(self, index: int) -> float:
-        """The linearised fit of column ``index``: ``g⊥ᵀz / |g⊥|²`` per unit of its
-        physical coefficient."""
-        norm = float(np.linalg.norm(self.projected[:, index]))
-        scale = self.modes.scale[index]
-        return float(self.scores[index] / norm / scale) if norm > 0 else 0.0
+        """Column ``index``'s coefficient per unit of its physical coefficient: from the
+        best mode's routes fitted together where it is one of them, else its own
+        linearised fit ``g⊥ᵀz / |g⊥|²``."""
+        pair = list(self.routes[self.best])
+        if index in pair:
+            return float(self.fit[1][self.best][pair.index(index)] / self.modes.scale[index])
+        column = self.projected[:, index]
+        norm2 = float(column @ column)
+        z = self.decision.observed.frame["z"]
+        return float(column @ z / norm2 / self.modes.scale[index]) if norm2 > 1e-18 else 0.0
 
     def amplitudes(self, index: int) -> np.ndarray:
         """The second mode's amplitude at the levels (``|q|`` through the joint, ``|κ| a²/
@@ -536,8 +661,9 @@ class _Search:
     def where(self, index: int) -> tuple[str, ...]:
         """Where the mode shows, in words: the participation, the damping it takes, the
         frequency it bends, the harmonic it feeds."""
-        modes, theta = self.modes, self.coefficient(index)
-        table = theta * modes.tables[index]
+        modes = self.modes
+        pair = self.routes[self.best] if index in self.routes[self.best] else (index,)
+        table = sum(self.coefficient(int(c)) * modes.tables[c] for c in pair)
         channels = list(self.decision.data.channels)
         mm = 1e3 * modes.levels_m
         second = self.amplitudes(index)
