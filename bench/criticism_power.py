@@ -18,8 +18,11 @@ the wrong-effect upper bounds — is printed, written to ``--out`` and ends in o
 Targets: ratio ≤ 1.25; search power ≥ 80 % of the oracle's where the oracle's ≥ 0.5;
 wrong-effect rate ≤ 5 % (one-sided 95 % Clopper–Pearson upper bound) at every size.
 
-Run: ``nice -n 10 .venv/bin/python bench/criticism_power.py --effects cubic_stiffness
---campaigns 20``; then ``… --summary`` and ``… --plot docs/images/power_curves.png``.
+Run: ``nice -n 10 .venv/bin/python bench/criticism_power.py --source independent --effects
+cubic_stiffness --campaigns 60 --rows bench/results/criticism_power_independent_rows_v2.jsonl
+--out bench/results/criticism_power_independent_v2.json``; then ``… --summary`` and
+``… --plot docs/images/power_curves.png``. Rows and pilot files without ``_v2`` were computed
+before the one calibrated rule and its bootstrap (kept, not read by default).
 """
 
 import argparse
@@ -97,6 +100,7 @@ def _summary(curve: Curve, anchor: float) -> dict:
         "search_power": curve.search,
         "oracle_power": curve.oracle,
         "fires": curve.fires,
+        "contradicts": curve.contradicts,
         "size80_fires": curve.size80_fires,
         "ratio_fires": curve.size80_fires / curve.size80_oracle
         if 0 < curve.size80_oracle < math.inf
@@ -132,12 +136,13 @@ def _finite(value):
 
 def _text(s: dict) -> str:
     lines = [f"{s['effect']} ({s['source']}), anchor {s['anchor']:.4g}"]
-    lines.append("  size      n   search  fires  oracle  wrong  wrong≤")
+    lines.append("  size      n   search  fires  oracle  wrong  wrong≤  fired-yet-quiet")
     for i, size in enumerate(s["sizes"]):
         lines.append(
             f"  {size:<8.4g} {s['campaigns'][i]:3d}   {s['search_power'][i]:5.2f}   "
             f"{s['fires'][i]:5.2f}  "
-            f"{s['oracle_power'][i]:5.2f}   {s['wrong'][i]:3d}   {s['wrong_upper'][i]:.3f}"
+            f"{s['oracle_power'][i]:5.2f}   {s['wrong'][i]:3d}   {s['wrong_upper'][i]:.3f}  "
+            f"{s['contradicts'][i]:3d}"
         )
     lines.append(
         f"  80 %-size: search {s['size80_search']:.4g} {_pair(s['size80_search_interval'])}, "
@@ -204,8 +209,10 @@ def main() -> None:
     parser.add_argument("--campaigns", type=int, default=20, help="campaigns per size")
     parser.add_argument("--source", default="lab", choices=sorted(SOURCES))
     parser.add_argument("--seed-start", type=int, default=REPORTED_SEED)
-    parser.add_argument("--rows", type=Path, default=RESULTS / "criticism_power_rows.jsonl")
-    parser.add_argument("--pilot", type=Path, default=RESULTS / "criticism_power_pilot.jsonl")
+    # the v2 files: rows and pilot computed under the one calibrated rule (the files
+    # without the suffix predate it; docs/criticism.md, power)
+    parser.add_argument("--rows", type=Path, default=RESULTS / "criticism_power_rows_v2.jsonl")
+    parser.add_argument("--pilot", type=Path, default=RESULTS / "criticism_power_pilot_v2.jsonl")
     parser.add_argument("--out", type=Path, default=RESULTS / "criticism_power.json")
     parser.add_argument("--summary", action="store_true", help="summarise the rows, run nothing")
     parser.add_argument("--plot", type=Path, help="draw the power curves of --rows to a PNG")
@@ -236,7 +243,8 @@ def main() -> None:
         print(_text(summary), flush=True)
         summaries.append(summary)
     keys = ("size80_search", "size80_oracle", "ratio", "ratio_interval", "expected_ratio",
-            "size80_fires", "ratio_fires", "max_wrong_upper", "campaigns")  # fmt: skip
+            "size80_fires", "ratio_fires", "max_wrong_upper", "campaigns",
+            "contradicts")  # fmt: skip
     figures = {
         "bench": "criticism_power",
         "source": args.source,

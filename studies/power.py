@@ -59,6 +59,7 @@ from identification.model import JointModel
 from identification.rig import RIG_PRESETS, rig_for_preset
 from identification.rig.presets import LAB_HIDDEN_SCENARIOS, lab_hidden_scenario
 from independent import CATALOGUE_FORCES, JointSpec, phase_resonance_campaign
+from studies.driver import QUIET_VERDICTS
 from studies.rows import Row
 from studies.seeds import HELD_OUT_SEED
 
@@ -250,6 +251,12 @@ class PowerRow(Row):
         )
 
     @property
+    def contradicts(self) -> bool:
+        """Diagnostic: the calibrated tests fire and the verdict says nothing is missing
+        or drift — a verdict its own test contradicts (never, under the one calibrated rule)."""
+        return self.fires and self.verdict in QUIET_VERDICTS
+
+    @property
     def oracle_detects(self) -> bool:
         return self.oracle_gain > self.oracle_threshold
 
@@ -377,6 +384,9 @@ class Curve:
     fires, size80_fires
         Per size, the share where the search's calibrated tests fire (:attr:`PowerRow.fires`),
         and its 80 %-size: the search before ``where()``, refits and groups.
+    contradicts
+        Per size, campaigns whose verdict its own fired test contradicts
+        (:attr:`PowerRow.contradicts`).
     wrong_upper
         Per size: one-sided 95 % Clopper–Pearson upper bound of the wrong-effect rate.
     size80_search, size80_oracle, ratio
@@ -396,6 +406,7 @@ class Curve:
     wrong: list[int]
     wrong_upper: list[float]
     fires: list[float]
+    contradicts: list[int]
     size80_fires: float
     size80_search: float
     size80_oracle: float
@@ -455,6 +466,7 @@ def power_curve(rows: Sequence[PowerRow], seed: int = 0) -> Curve:
         wrong=wrong,
         wrong_upper=[wrong_upper(w, len(g)) for w, g in zip(wrong, by_size, strict=True)],
         fires=fires,
+        contradicts=[sum(r.contradicts for r in group) for group in by_size],
         size80_fires=size_at_power(sizes, fires),
         size80_search=s80,
         size80_oracle=o80,

@@ -48,6 +48,18 @@ def test_obvious_effect_is_found_by_search_and_oracle():
     assert test.threshold < crit.decision.calibration.catalogue_threshold
 
 
+def test_a_fired_test_names_the_independent_simulators_effect():
+    # Data from the independent simulator (its own forces and balance, no library kernel)
+    # hiding a weak cubic stiffness, 0.1× the hidden scenario's (tuning seed 1): before the
+    # one calibrated rule this campaign fired (gain above threshold, p ≤ 0.001) and was
+    # answered "nothing missing". Where the test fires, the truth must be what is named and
+    # the verdict must not be one its test contradicts.
+    row = power_campaign("independent", CUBIC_STIFFNESS, 0.1, seed=1)
+    assert row.fires and row.oracle_detects
+    assert not row.contradicts and row.verdict not in ("nothing missing", "drift")
+    assert row.outcome == "named" and CUBIC_STIFFNESS in row.group
+
+
 def test_oracle_refuses_an_effect_the_model_holds():
     crit = _campaign(CUBIC_STIFFNESS, 0.3, seed=11)
     with pytest.raises(ValueError, match="not a candidate"):
