@@ -11,7 +11,12 @@ CASE_STUDIES = sorted((Path(__file__).parents[1] / "case_studies").glob("*.py"))
 
 
 #: Case studies too long for the default suite (each stage keeps end-to-end coverage there).
-SLOW = {"virtual_trc_benchmark"}  # 180 s: SINDy's shape scan over the TRC-size records
+SLOW = {
+    "virtual_trc_benchmark",  # 180 s: SINDy's shape scan over the TRC-size records
+    # 42 s; the CI-size hidden-effect acceptance (tests/test_acceptance_studies.py) runs
+    # the same study's campaigns (studies.criticism_study), tests/test_criticism.py its plots
+    "hidden_effect_study",
+}
 
 
 @pytest.mark.parametrize(
