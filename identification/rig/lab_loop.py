@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from identification.analytical.pll.loop import ramp_level, wrap_angle
 from identification.rig.conditions import Controller, Drift
 
 __all__ = ["LOOP_CHANNELS", "LabChannels", "loop_settings"]
@@ -114,19 +115,6 @@ def coil(amplitude, theta, distortion):
 
 
 @numba.njit(cache=True, inline="always")
-def ramp_level(a_from, a_to, samples, ramp):
-    """Raised-cosine ramp from ``a_from`` to ``a_to`` over ``ramp`` samples."""
-    if samples >= ramp:
-        return a_to
-    return a_from + (a_to - a_from) * 0.5 * (1.0 - np.cos(np.pi * samples / ramp))
-
-
-@numba.njit(cache=True, inline="always")
-def _wrap(angle):
-    return angle - 2.0 * np.pi * np.ceil((angle - np.pi) / (2.0 * np.pi))
-
-
-@numba.njit(cache=True, inline="always")
 def _demodulate(filters, k, value, alpha):
     """One sample through the ``k``-th cascade of first-order low passes; its output."""
     for stage in range(filters.shape[1]):
@@ -178,7 +166,7 @@ def track(settings, filters, response, base, theta, hold, in_hold, control_on, i
         i_r = _demodulate(filters, 2, base * s, alpha)
         q_r = _demodulate(filters, 3, base * c, alpha)
         phase -= np.arctan2(q_r, i_r)
-    error = _wrap(phase - settings[TARGET])
+    error = wrap_angle(phase - settings[TARGET])
     if in_hold == int(settings[RAMP]) and hold == 0:
         control_on = True
     if control_on:

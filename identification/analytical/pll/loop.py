@@ -56,13 +56,13 @@ KP, KI, MU, OMEGA_INITIAL, OMEGA_LOW, OMEGA_HIGH, N_SUB, N_CONTROL = range(8)
 
 
 @numba.njit(cache=True)
-def _wrap(angle):
+def wrap_angle(angle):
     """Angle in (−π, π]."""
     return angle - 2.0 * np.pi * np.ceil((angle - np.pi) / (2.0 * np.pi))
 
 
 @numba.njit(cache=True)
-def _ramp(a_from, a_to, samples, ramp):
+def ramp_level(a_from, a_to, samples, ramp):
     """Raised-cosine ramp from ``a_from`` to ``a_to`` over ``ramp`` samples."""
     if samples >= ramp:
         return a_to
@@ -122,7 +122,7 @@ def start_level(settings, state, result):
 def oscillator(state, a_from, a_to, k, ramp):
     """Sample ``k``'s oscillator: ``(θ, sin θ, cos θ, A)``, ``A`` the ramped level."""
     theta = state[THETA]
-    return theta, np.sin(theta), np.cos(theta), _ramp(a_from, a_to, k, ramp)
+    return theta, np.sin(theta), np.cos(theta), ramp_level(a_from, a_to, k, ramp)
 
 
 @numba.njit(cache=True, inline="always")
@@ -132,7 +132,7 @@ def excitation_samples(forcing, u, a_from, a_to, k, ramp, theta, step):
     forcing[0] = u
     for j in range(1, n_half + 1):
         fraction = j / n_half
-        forcing[j] = _ramp(a_from, a_to, k + fraction, ramp) * np.sin(theta + step * fraction)
+        forcing[j] = ramp_level(a_from, a_to, k + fraction, ramp) * np.sin(theta + step * fraction)
 
 
 @numba.njit(cache=True, inline="always")
@@ -171,7 +171,7 @@ def record_loop(record, row, k, u, amplitude, c, theta, omega, phase, settings):
     record[row + 1, k] = -amplitude * c / omega
     record[row + 2, k] = omega / (2.0 * np.pi)
     record[row + 3, k] = theta
-    record[row + 4, k] = np.degrees(_wrap(phase - settings[REFERENCE]))
+    record[row + 4, k] = np.degrees(wrap_angle(phase - settings[REFERENCE]))
     record[row + 5, k] = amplitude
 
 
@@ -220,7 +220,7 @@ def loop_step(settings, control, state, detector, result, k, y, s, c, amplitude,
     """
     dt = settings[DT]
     phase = _detect(detector, y, s, c, int(settings[HARMONICS]), control[MU] * dt)
-    error = _wrap(phase - settings[TARGET])
+    error = wrap_angle(phase - settings[TARGET])
 
     # PI controller with anti-windup at the frequency limits.
     omega = state[OMEGA]
@@ -281,7 +281,7 @@ def close_level(settings, state, result, n_samples, done, amplitude_m, gain, q_b
         result[FREQUENCY] = frequency
         result[DAMPING] = gain * amplitude_base / (2.0 * amplitude_m)
         phase_difference = np.arctan2(q_y.imag, q_y.real) - np.arctan2(q_base.imag, q_base.real)
-        result[PHASE_ERROR] = np.degrees(_wrap(phase_difference - settings[TARGET]))
+        result[PHASE_ERROR] = np.degrees(wrap_angle(phase_difference - settings[TARGET]))
         result[LOCKED] = 1.0
     elif result[DIVERGED] == 0.0:
         result[PHASE_ERROR] = np.degrees(error)
