@@ -127,6 +127,27 @@ def test_kept_logp_gives_pymcs_chain_with_one_evaluation_per_proposal():
     assert len(np.unique(chains["kept"][:, 0])) > 100  # the chain moved
 
 
+def test_a_step_over_some_variables_scores_by_pymcs_delta_logp():
+    # Where another step moves the rest, the current point's logp can change between steps:
+    # the step keeps PyMC's two-point difference (compiled only then), and it is that one.
+    from pymc.pytensorf import make_shared_replacements
+    from pymc.step_methods.metropolis import delta_logp
+
+    from pm_joint.inference.steps import CovarianceMetropolis, KeptLogp
+
+    with pm.Model() as pm_model:
+        x = pm.Uniform("x", -5.0, 5.0)
+        pm.Normal("y", mu=x, sigma=1.0)
+        step = CovarianceMetropolis([x], rng=np.random.default_rng(7))
+    assert not isinstance(step.delta_logp, KeptLogp)
+    point = pm_model.initial_point()
+    shared = make_shared_replacements(point, step.vars, pm_model)  # y held at its value
+    reference = delta_logp(point, pm_model.logp(), step.vars, shared, None)
+    q0, q1 = np.array([0.1]), np.array([-0.4])
+    assert step.delta_logp(q1, q0) != 0.0
+    assert step.delta_logp(q1, q0) == pytest.approx(reference(q1, q0), rel=1e-12)
+
+
 # A demo-like posterior with a known answer. Parameter i has a uniform prior on
 # [LOW[i], LOW[i] + WIDTH[i]] (the demo's boxes span scales 1e-4 to 1e10); in box fractions
 # u the potentials below make: u0 ~ N(0.5, 0.016) (the demo's linear stiffness), u1 and u3

@@ -35,6 +35,8 @@ evaluation per proposal, the same chain.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import field
 from typing import Any, ClassVar
 
@@ -45,6 +47,7 @@ from pymc.blocking import RaveledVars
 from pymc.logprob.transforms import IntervalTransform
 from pymc.pytensorf import compile as compile_pytensor
 from pymc.pytensorf import join_nonshared_inputs, make_shared_replacements
+from pymc.step_methods import metropolis as pymc_metropolis
 from pymc.step_methods.metropolis import (
     MetropolisState,
     MultivariateNormalProposal,
@@ -70,6 +73,23 @@ class CovarianceMetropolisState(MetropolisState):
     _window_start: int
     _pilot: list
     _last: tuple | None
+
+
+@contextmanager
+def _deferred_delta_logp() -> Iterator[list]:
+    """PyMC's Metropolis without its ``delta_logp`` compiled: the arguments are kept instead.
+
+    ``pm.Metropolis.__init__`` compiles ``logp(q) − logp(q0)`` (its graph rewrites are most
+    of a step's set-up on the updating models), which :class:`KeptLogp` replaces wherever
+    the step moves every variable; the kept arguments compile it where it does not.
+    """
+    kept: list = []
+    compile_now = pymc_metropolis.delta_logp
+    pymc_metropolis.delta_logp = lambda *args: kept.extend(args)
+    try:
+        yield kept
+    finally:
+        pymc_metropolis.delta_logp = compile_now
 
 
 class CovarianceMetropolis(pm.Metropolis):
@@ -127,11 +147,13 @@ class CovarianceMetropolis(pm.Metropolis):
             raise ValueError("pilot_fraction and final_fraction must leave room for adaptation")
         if coordinates not in ("box", "value"):
             raise ValueError(f"coordinates must be 'box' or 'value', got {coordinates!r}")
-        super().__init__(vars, **kwargs)
+        with _deferred_delta_logp() as deferred:
+            super().__init__(vars, **kwargs)
         self.coordinates = coordinates
         self._box = np.zeros(0, dtype=int)  # raveled indices walked as box fractions
         self._last = None  # (value-space point, working point) of the last step
-        self._keep_current_logp(kwargs)
+        if not self._keep_current_logp(kwargs):
+            self.delta_logp = pymc_metropolis.delta_logp(*deferred)
         self.adapt_covariance = adapt_covariance
         self.pilot_fraction = pilot_fraction
         self.final_fraction = final_fraction
@@ -139,18 +161,20 @@ class CovarianceMetropolis(pm.Metropolis):
         self.tune_steps = None  # told by the sampler (set_tune_steps); else no covariance
         self._reset_adaptation()
 
-    def _keep_current_logp(self, kwargs) -> None:
-        """Score proposals with :class:`KeptLogp` where the step moves every variable."""
+    def _keep_current_logp(self, kwargs) -> bool:
+        """Score proposals with :class:`KeptLogp` where the step moves every variable;
+        False where it does not (PyMC's ``logp(q) − logp(q0)`` is needed then)."""
         model = pm.modelcontext(kwargs.get("model"))
         point = kwargs.get("initial_point") or model.initial_point()
         if make_shared_replacements(point, self.vars, model):
-            return  # another step moves the rest: the current point's logp can change under us
+            return False  # another step moves the rest: the current point's logp can change
         [logp], joined = join_nonshared_inputs(point, [model.logp()], self.vars, {})
         function = compile_pytensor([joined], logp, **(kwargs.get("compile_kwargs") or {}))
         function.trust_input = True
         if self.coordinates == "box":
             self._box = _bounded_indices(model, self.vars, point)
         self.delta_logp = KeptLogp(function, self._box)
+        return True
 
     # -- tuning schedule --------------------------------------------------------
 
