@@ -69,7 +69,9 @@ def test_rig_campaign_through_every_stage(rig_campaign, tmp_path, capsys):
 
     surrogate = tmp_path / "surrogate"
     argv = ["train-surrogate", str(rig_campaign), "--model", str(model), "--out", str(surrogate)]
-    assert main([*argv, "--curves", "80", "--epochs", "40"]) == 0
+    # 40 curves: what follows checks the dataset's counts and the stages' files, not the
+    # surrogate's accuracy (tests/test_surrogate_grid.py and bench/surrogate.py do).
+    assert main([*argv, "--curves", "40", "--epochs", "40"]) == 0
     assert (surrogate / "surrogate.onnx").exists()
     # The amplitude grid: every analytical curve requested is generated and used, the
     # measured curves are added or named as left out, and the sidecar carries the
@@ -77,7 +79,7 @@ def test_rig_campaign_through_every_stage(rig_campaign, tmp_path, capsys):
     dataset = BackboneDataset.load(surrogate / "dataset.npz")
     counts, offered = dataset.provenance["counts"], 3
     assert dataset.spec.representation == "amplitude_grid"
-    assert counts["requested"] == counts["generated"] == 80 - offered
+    assert counts["requested"] == counts["generated"] == 40 - offered
     left_out = dataset.provenance["measured"]["excluded"]
     assert counts["measured"] + len(left_out) == offered
     assert len(dataset) == counts["generated"] + counts["measured"]
@@ -96,7 +98,7 @@ def test_rig_campaign_through_every_stage(rig_campaign, tmp_path, capsys):
     assert dataset.spec.amplitudes_m[[0, -1]] == pytest.approx(shared, rel=1e-12)
     # On a two-worker dask LocalCluster the dataset is the serial one, bit for bit.
     on_dask = tmp_path / "surrogate_dask"
-    argv_dask = [*argv[:-1], str(on_dask), "--curves", "80", "--epochs", "1", "--workers", "2"]
+    argv_dask = [*argv[:-1], str(on_dask), "--curves", "40", "--epochs", "1", "--workers", "2"]
     assert main(argv_dask) == 0
     serial, distributed = (BackboneDataset.load(f / "dataset.npz") for f in (surrogate, on_dask))
     for name in ("X", "Y", "origin", "non_monotone"):
