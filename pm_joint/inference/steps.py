@@ -79,7 +79,7 @@ class CovarianceMetropolisState(MetropolisState):
 def _deferred_delta_logp() -> Iterator[list]:
     """PyMC's Metropolis without its ``delta_logp`` compiled: the arguments are kept instead.
 
-    ``pm.Metropolis.__init__`` compiles ``logp(q) − logp(q0)`` (its graph rewrites are most
+    ``pm.Metropolis.__init__`` compiles ``logp(q) − logp(q0)`` (its graph rewrites are about half
     of a step's set-up on the updating models), which :class:`KeptLogp` replaces wherever
     the step moves every variable; the kept arguments compile it where it does not.
     """
