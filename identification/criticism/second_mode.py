@@ -63,7 +63,7 @@ directions, the exchange's coefficient (``b²``, ``κ²``) ≥ 0. A mode's gain 
 **The rule** (fixed before the study, ``docs/criticism.md``, "A missing mode"). A second
 mode is named when
 
-1. a mode's frequency is *located* — its *prominence*, its gain less the larger of its
+1. the screen locates a mode — its *prominence*, its gain less the larger of its
    family's two grid-end gains (where the mode is far and the columns catalogue-like
    shapes of no frequency), is at least :data:`~.config.SEPARATION` — and of the located
    modes the one that fits best (the largest gain) has a gain above its own threshold, the
@@ -89,9 +89,10 @@ or below it), so the screen names a mode but states no frequency. Where 1 and 2 
 mode, the two-mode refit (:mod:`~identification.criticism.mode_refit`: the base model and a
 second mode by the N-mode harmonic balance, its frequency, joint share, base participation
 and coupling fitted) gives each route's profile of Δχ² over the second mode's frequency; the
-best route *locates* the frequency where its interval (within ``SEPARATION`` of the best)
-is one, inside its grid, at most ±5 % wide, above the grid's ends by ``SEPARATION``, and its
-gain exceeds the catalogue's best by ``SEPARATION``. Then the finding states the
+best route *locates* the frequency where its best ratio has solved neighbours on both sides
+(not its grid's end, not the band the backbone crosses), no ratio more than 5 % from it
+fits within ``SEPARATION`` of it, and its gain exceeds the catalogue's best by
+``SEPARATION``. Then the finding states the
 frequency, its interval and the route; otherwise it is named "a second mode, frequency not
 located" with why (:attr:`SecondMode.location`) — the data of one sensor may not tell where
 a mode near 1:1 is, and the finding says so rather than a number. The route named is the
