@@ -4,12 +4,13 @@ Runs :func:`studies.second_mode.second_mode_campaign` over cases and seeds (the 
 and the cases are in :mod:`studies.second_mode`, fixed before any reported run), one
 process, appending each row to a JSON-lines file as it finishes (a run stopped by
 ``--stop-at`` keeps what it did), then counts per case with two-sided 95 % Clopper–Pearson
-intervals against #27's acceptance (≥ 27 of 30 per two-mode case, ≤ 1 of 30 on one-mode data).
+intervals against #27's acceptance (≥ 27 of 30 per two-mode case, ≤ 1 of 30 on one-mode data),
+beside how many were named at a located frequency and at a wrong one.
 
     nice -n 10 python bench/criticism_second_mode.py --first-seed 0 --seeds 1   # tuning
-    nice -n 10 python bench/criticism_second_mode.py --cases "lab-second-mode,two-mode 1:2,\\
-        two-mode near 1:1" --first-seed 6000000 --seeds 10 \\
-        --rows bench/results/criticism_missing_mode_rows_block6.jsonl --stop-at 22:12  # held out
+    nice -n 10 python bench/criticism_second_mode.py --cases "two-mode near 1:1,independent \\
+        near 1:1,two-mode 1:2,independent 1:2,lab-second-mode" --first-seed 8000000 --seeds 30 \\
+        --rows bench/results/criticism_missing_mode_rows_block8.jsonl --stop-at 01:40  # held out
     python bench/criticism_second_mode.py --rows FILE --summary                # count only
 
 Ends with one JSON line; writes ``bench/results/criticism_missing_mode[_tuning].json``.
@@ -22,6 +23,7 @@ import datetime as dt
 import json
 from pathlib import Path
 
+from studies.binomial import clopper_pearson
 from studies.second_mode import CASES, TWO_MODE_CASES, SecondModeRow, count, second_mode_campaign
 from studies.seeds import HELD_OUT_SEED
 
@@ -65,14 +67,20 @@ def main() -> None:
     counts = count(rows)
     for c in counts:
         what = "named within 5 %" if c.two_modes else "named (wrongly)"
-        print(f"{c.case}: {c.passed if c.two_modes else c.named} of {c.n} {what} "
+        print(f"{c.case}: {c.passed if c.two_modes else c.named} of {c.n} {what}; named "
+              f"{c.named}, located {c.located}, at a wrong frequency {c.wrong} "
               f"(95 % CP {100 * c.low:.1f}–{100 * c.high:.1f} %), seeds {c.seeds}")  # fmt: skip
+    one_mode = [r for r in rows if not r.two_modes]
+    falsely = sum(r.named for r in one_mode)
     summary = {
         "benchmark": "criticism_missing_mode",
         "target": TARGET,
         "rows": str(rows_path),
         "two_mode_cases": list(TWO_MODE_CASES),
         "counts": [c.to_dict() for c in counts],
+        "one_mode_named": falsely,
+        "one_mode_n": len(one_mode),
+        "one_mode_cp95": list(clopper_pearson(falsely, len(one_mode))) if one_mode else None,
     }
     (RESULTS / f"{name}.json").write_text(json.dumps(summary, indent=2) + "\n")
     print(json.dumps(summary))

@@ -63,7 +63,7 @@ directions, the exchange's coefficient (``b²``, ``κ²``) ≥ 0. A mode's gain 
 **The rule** (fixed before the study, ``docs/criticism.md``, "A missing mode"). A second
 mode is named when
 
-1. a mode's frequency is *located* — its *prominence*, its gain less the larger of its
+1. the screen locates a mode — its *prominence*, its gain less the larger of its
    family's two grid-end gains (where the mode is far and the columns catalogue-like
    shapes of no frequency), is at least :data:`~.config.SEPARATION` — and of the located
    modes the one that fits best (the largest gain) has a gain above its own threshold, the
@@ -82,10 +82,22 @@ one alternative it sees a 1:2 mode's small signature that the free-form referenc
 over its whole basis. On a campaign the base model explains, 1 passes with probability
 ``α'``: a one-mode campaign names a mode with probability at most ``α'``, and the
 criticism (:attr:`~.criticism.Criticism.significant`) fires with at most ``α + α'``.
-The mode's frequency is the best mode's, its route named the exchange (joint or
-coupling) where that coefficient is not 0, its coefficients the joint fit's, and from them
-the energy share it carries at the top level
-(:func:`identification.multimode.solve.energy_shares`) and where it shows.
+
+**The frequency is the refit's, never the screen's.** Near 1:1 a linearised column can fit
+best far from the truth (on the two-mode rig near 1:1, at twice the first mode's frequency
+or below it), so the screen names a mode but states no frequency. Where 1 and 2 name a
+mode, the two-mode refit (:mod:`~identification.criticism.mode_refit`: the base model and a
+second mode by the N-mode harmonic balance, its frequency, joint share, base participation
+and coupling fitted) gives each route's profile of Δχ² over the second mode's frequency; the
+best route *locates* the frequency where its best ratio has solved neighbours on both sides
+(not its grid's end, not the band the backbone crosses), no ratio more than 5 % from it
+fits within ``SEPARATION`` of it, and its gain exceeds the catalogue's best by
+``SEPARATION``. Then the finding states the
+frequency, its interval and the route; otherwise it is named "a second mode, frequency not
+located" with why (:attr:`SecondMode.location`) — the data of one sensor may not tell where
+a mode near 1:1 is, and the finding says so rather than a number. The route named is the
+refit's best; the share and where it shows come from the screen's fit (no frequency in
+them where none is located).
 """
 
 from __future__ import annotations
@@ -100,6 +112,7 @@ import numpy as np
 from identification.criticism import calibration as cal
 from identification.criticism.config import LINEAR_PAIR, SEPARATION
 from identification.criticism.directions import Direction, mean_prediction
+from identification.criticism.mode_refit import RefitProfile, refit_profiles
 from identification.effects import CATALOGUE
 from identification.multimode.solve import energy_shares
 
@@ -439,7 +452,8 @@ class SecondMode:
         the other of its pair (the last two: one 1:2 mechanism, seen in the backbone or in
         the second harmonic).
     ratio, frequency_hz
-        Its frequency over the first mode's, and in Hz.
+        Its frequency over the first mode's, and in Hz, where the two-mode refit locates it
+        (:mod:`~identification.criticism.mode_refit`); NaN where it does not.
     first_frequency_hz
         The first mode's frequency it is measured against (the base model's at the
         lowest level).
@@ -455,6 +469,13 @@ class SecondMode:
         Where it shows, in words (participation, damping, the harmonic it feeds).
     why
         Why it was not named (empty when named).
+    located, interval_hz, location
+        Whether the two-mode refit locates its frequency (run where the rule names a
+        mode), the interval the data place it in (Hz; NaN where not located), and why it is
+        not located (empty where it is, or where the refit did not run).
+    screen_frequency_hz
+        The linear screen's best column's frequency: a diagnostic, never a finding (near
+        1:1 a linearised column may fit best far from the truth).
     """
 
     named: bool
@@ -468,10 +489,15 @@ class SecondMode:
     catalogue_gain: float
     where: tuple[str, ...] = ()
     why: str = ""
+    located: bool = False
+    interval_hz: tuple[float, float] = (float("nan"), float("nan"))
+    location: str = ""
+    screen_frequency_hz: float = float("nan")
 
     @property
     def text(self) -> str:
-        """ "a second mode near F Hz (ratio r to the first) exchanges energy with it …"."""
+        """ "a second mode near F Hz (ratio r to the first, between L and H Hz) exchanges
+        energy with it …", or "a second mode, frequency not located (why) …"."""
         how = {
             JOINT: "exchanges energy with it through the joint",
             SENSOR: "shows in the response beside it (the sensor sees it, the base drives it)",
@@ -479,9 +505,13 @@ class SecondMode:
             self.mechanism,
             "exchanges energy with it through a quadratic coupling at twice its frequency (1:2)",
         )
+        if not self.located:
+            why = f" ({self.location})" if self.location else ""
+            return f"a second mode, frequency not located{why}: it {how}"
+        low, high = self.interval_hz
         return (
             f"a second mode near {self.frequency_hz:.4g} Hz (ratio {self.ratio:.3g} to the "
-            f"first) {how}"
+            f"first, between {low:.4g} and {high:.4g} Hz) {how}"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -593,7 +623,7 @@ class _Search:
         why, threshold = "", float("nan")
         if not self.located.any():
             why = (
-                "no frequency is located: no mode gains more than a mode at either end of "
+                "the linear screen locates no mode: none gains more than a mode at either end of "
                 f"its grid by {SEPARATION:g}"
             )
         elif gain < catalogue + SEPARATION:
@@ -605,20 +635,36 @@ class _Search:
             threshold = self.threshold()
             if gain <= threshold:
                 why = f"its gain Δχ² {gain:.4g} is below its calibrated threshold {threshold:.3g}"
-        ratio = float(modes.ratios[route])
+        refit = self.refit() if not why else None
+        location = "" if refit is None else refit.why_not_located
+        if refit is not None and not location and refit.gain < catalogue + SEPARATION:
+            location = (
+                f"the two-mode refit's gain Δχ² {refit.gain:.4g} does not exceed the "
+                f"catalogue's best ({catalogue:.4g}) by {SEPARATION:g}"
+            )
+        located = refit is not None and not location
+        nan = float("nan")
         return SecondMode(
             named=not why,
-            mechanism=modes.mechanisms[route],
-            ratio=ratio,
-            frequency_hz=ratio * modes.first_frequency_hz,
+            mechanism=modes.mechanisms[route] if refit is None else refit.route,
+            ratio=refit.frequency_hz / modes.first_frequency_hz if located else nan,
+            frequency_hz=refit.frequency_hz if located else nan,
             first_frequency_hz=modes.first_frequency_hz,
             share=self.share(route),
             gain=gain,
             threshold=threshold,
             catalogue_gain=catalogue,
-            where=self.where(route),
+            where=self.where(route, refit.frequency_hz if located else None),
             why=why,
+            located=located,
+            interval_hz=refit.interval_hz if located else (nan, nan),
+            location=location,
+            screen_frequency_hz=float(modes.ratios[route] * modes.first_frequency_hz),
         )
+
+    def refit(self) -> RefitProfile:
+        """The two-mode refit's best route (:func:`~.mode_refit.refit_profiles`)."""
+        return max(refit_profiles(self.decision), key=lambda p: p.gain)
 
     def coefficient(self, index: int) -> float:
         """Column ``index``'s coefficient per unit of its physical coefficient: from the
@@ -658,9 +704,10 @@ class _Search:
         modal = 2 * np.pi * modes.first_frequency_hz * np.array([1.0, modes.ratios[index]])
         return float(energy_shares(coefficients, np.asarray(omega), modal)[1])
 
-    def where(self, index: int) -> tuple[str, ...]:
+    def where(self, index: int, frequency_hz: float | None) -> tuple[str, ...]:
         """Where the mode shows, in words: the participation, the damping it takes, the
-        frequency it bends, the harmonic it feeds."""
+        frequency it bends, the harmonic it feeds (its frequency ``frequency_hz`` where
+        located, else none stated)."""
         modes = self.modes
         pair = self.routes[self.best] if index in self.routes[self.best] else (index,)
         table = sum(self.coefficient(int(c)) * modes.tables[c] for c in pair)
@@ -696,6 +743,7 @@ class _Search:
             out.append(
                 f"the second harmonic it feeds: {100 * ratio[-1]:.2g} % of the fundamental at "
                 f"{mm[-1]:.2g} mm, its phase turning by {turn:.0f}° over the levels as 2ω "
-                f"nears {modes.ratios[index] * modes.first_frequency_hz:.4g} Hz"
-            )
+                + ("nears the second mode" if frequency_hz is None
+                   else f"nears {frequency_hz:.4g} Hz")
+            )  # fmt: skip
         return tuple(out)
