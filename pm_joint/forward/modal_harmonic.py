@@ -426,7 +426,10 @@ def modal_backbone_graph(
 
     # A scan, not an unrolled loop: the graph (and its compile time) stays one step long.
     start = [w[t] ** 2 + zero, zero] + [zero] * (2 * len(others))
-    steps = pytensor.scan(iteration, outputs_info=start, n_steps=iterations, return_updates=False)
+    # θ named as a non-sequence: traced implicitly, a PyMC prior's random draw would be copied
+    # into the loop (its RNG with it) instead of its value entering it.
+    steps = pytensor.scan(iteration, outputs_info=start, non_sequences=[theta], n_steps=iterations,
+                          return_updates=False)  # fmt: skip
     last = [s[-1] for s in steps]
     before = [s[-2] for s in steps]
     omega_squared, base = last[0], last[1]
