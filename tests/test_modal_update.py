@@ -160,3 +160,22 @@ def test_two_mode_updating_on_rig_decays_recovers_the_modal_frequencies(tmp_path
         centre = frequencies[:, m - 1].mean()
         pad = scatter[f"mode{m}.frequency_hz"] * centre
         assert low - pad <= centre <= high + pad, (m, low, high, centre)
+
+
+def test_the_hierarchical_model_shares_each_assemblys_parameters_across_its_modes():
+    from pm_joint.inference.modal import modal_hierarchical_model
+
+    measured = read_mode_backbones(_population_table())
+    pm_model = modal_hierarchical_model(_truth(), measured, n_levels=6)
+    assert pm_model.coords["curve"] == tuple(f"A{i + 1}" for i in range(N_ASSEMBLIES))
+    assert pm_model.coords["group"] == ("mode 1", "mode 2")
+    curve = pm_model["curve_index"].get_value()
+    mode = pm_model["mode_index"].get_value()
+    # Every assembly reaches the 6 levels of each mode (its curve spans the mode's range).
+    assert np.bincount(curve).tolist() == [12] * N_ASSEMBLIES
+    assert np.bincount(mode).tolist() == [6 * N_ASSEMBLIES] * 2
+    assert [rv.name for rv in pm_model.observed_RVs] == ["frequency_hz", "damping_ratio"]
+    # A noise and a slope per mode and channel: a frequency noise in Hz of one mode says
+    # nothing of another's.
+    assert pm_model.named_vars_to_dims["frequency_hz_noise"] == ("group",)
+    assert pm_model.named_vars_to_dims["damping_ratio_noise_slope"] == ("group",)
