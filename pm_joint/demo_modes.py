@@ -55,11 +55,12 @@ class TwoModeSize:
 
 
 #: ``full``: three training and three held-out decays of the rig's length; ``small``: a
-#: quick check (short decays, few draws).
+#: quick check (short decays, few draws; three training decays, as each mode's density
+#: needs three curves).
 MODE_SIZES = {
     "full": TwoModeSize(assemblies=3, held_out=3, decay_s=3.0, draws=30_000, tune=5_000,
                         chains=2),
-    "small": TwoModeSize(assemblies=2, held_out=1, decay_s=1.0, draws=300, tune=200, chains=2),
+    "small": TwoModeSize(assemblies=3, held_out=1, decay_s=1.0, draws=300, tune=200, chains=2),
 }  # fmt: skip
 
 #: The rig preset of the case.
