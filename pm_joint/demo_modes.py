@@ -134,17 +134,23 @@ def run_two_modes(out: Path, size: str, stages) -> dict[str, dict]:
     print(f"[pm-joint demo] two-mode updating: {verdict['headline']}")
 
     one_backbones = stages.run("one-mode backbones", pipeline.campaign_backbones, one_ws)
-    crit = stages.run("criticism of the one-mode model", pipeline.criticize_campaign, one_ws,
-                      one.model, out / "criticism_one_mode", measured=one_backbones)  # fmt: skip
-    found = crit.second_mode
-    answer = (
-        f"the criticism of the one-mode model answers {crit.verdict!s}; second mode: "
-        f"{'named' if found.named else 'not named'} ({found.text()})"
-    )
+    title = "Two modes: criticism of the one-mode model"
+    try:
+        crit = stages.run("criticism of the one-mode model", pipeline.criticize_campaign,
+                          one_ws, one.model, out / "criticism_one_mode",
+                          measured=one_backbones)  # fmt: skip
+    except ValueError as error:  # what happened is the finding: printed, not forced
+        answer = f"the criticism of the one-mode model stopped: {error}"
+        section = Section(title, answer)
+    else:
+        found = crit.second_mode
+        answer = (
+            f"the criticism of the one-mode model answers {crit.verdict!s}; second mode: "
+            f"{'named' if found.named else 'not named'} ({found.text()})"
+        )
+        section = criticism_section(crit.to_dict(), out / "criticism_one_mode", out)
+        section.title, section.text = title, f"{answer}\n\n{section.text}"
     print(f"[pm-joint demo] {answer}")
-    section = criticism_section(crit.to_dict(), out / "criticism_one_mode", out)
-    section.title = "Two modes: criticism of the one-mode model"
-    section.text = f"{answer}\n\n{section.text}"
     stages.sections.append(section)
 
     rows = stages.run("held-out predictions", _predictions, held, one.model, two.model, layout)
