@@ -375,7 +375,6 @@ EXIT_NOT_CONVERGED = 3
 
 
 def _cmd_update(args: argparse.Namespace) -> int:
-    from pm_joint.analysis import convergence_verdict
     from pm_joint.pipeline import posterior_report, update_backbones
     from pm_joint.workspace import Workspace
 
@@ -401,11 +400,18 @@ def _cmd_update(args: argparse.Namespace) -> int:
     if args.report:
         posterior_report(workspace, args.report)
         print(f"wrote {args.report}/report.json")
+    return _verdict_exit(idata, args.out)
+
+
+def _verdict_exit(idata: Any, out: str) -> int:
+    """Print the convergence verdict of ``update``; its exit code (3 when not converged)."""
+    from pm_joint.analysis import convergence_verdict
+
     verdict = convergence_verdict(idata)
     print(f"convergence: {verdict.headline()}")
     if not verdict.converged:
         print(
-            f"pm-joint update: NOT CONVERGED: the posterior in {args.out} is not a result yet; "
+            f"pm-joint update: NOT CONVERGED: the posterior in {out} is not a result yet; "
             "continue it with --resume and more --draws (exit code "
             f"{EXIT_NOT_CONVERGED})",
             file=sys.stderr,
@@ -431,7 +437,6 @@ def _is_modal_model(source: str) -> bool:
 def _update_modes(args: argparse.Namespace) -> int:
     """``update`` with a ModalModel: every mode's backbones (the ``--modes N`` table)."""
     from identification.multimode.model import ModalModel
-    from pm_joint.analysis import convergence_verdict
     from pm_joint.inference.modal import read_mode_backbones
     from pm_joint.modal_update import DENSITY_ATTR_MODE, update_modes
     from pm_joint.report_folder import report
@@ -465,16 +470,7 @@ def _update_modes(args: argparse.Namespace) -> int:
             density = stored_density(idata, DENSITY_ATTR_MODE.format(m))
             report(idata, backbones, density=density, out=folder, name=f"backbone_mode{m}")
             print(f"wrote {folder}/report.json")
-    verdict = convergence_verdict(idata)
-    print(f"convergence: {verdict.headline()}")
-    if not verdict.converged:
-        print(
-            f"pm-joint update: NOT CONVERGED: the posterior in {args.out} is not a result yet; "
-            f"continue it with --resume and more --draws (exit code {EXIT_NOT_CONVERGED})",
-            file=sys.stderr,
-        )
-        return EXIT_NOT_CONVERGED
-    return 0
+    return _verdict_exit(idata, args.out)
 
 
 def _extract_modes(workspace: Any, n_modes: int, args: argparse.Namespace) -> None:

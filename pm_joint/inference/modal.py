@@ -45,10 +45,12 @@ from identification.measurements.backbone import BackboneSet
 from identification.multimode.model import ModalModel
 from pm_joint.distributions import BackboneAmplitude, BackboneDensity, amplitude_levels
 from pm_joint.forward import BACKBONE_COLUMNS, forward_model, modal_backbone_graph
+from pm_joint.forward.modal_harmonic import template_values
 from pm_joint.inference.models import (
     HIERARCHICAL,
     POPULATION_MATCHING,
     POPULATION_SUFFIX,
+    check_varying,
     curve_points,
     observe_channel,
     population_draws,
@@ -123,7 +125,7 @@ def modal_update_names(model: ModalModel) -> list[str]:
 def modal_bounds(model: ModalModel, names: Sequence[str]) -> dict[str, tuple[float, float]]:
     """The default uniform prior box: frequencies ±:data:`FREQUENCY_SPREAD`, damping ratios
     within a factor :data:`DAMPING_FACTOR`, other parameters ±:data:`ELEMENT_SPREAD`."""
-    template = _template(model)
+    template = template_values(model)
     bounds = {}
     for name in names:
         if name not in template:
@@ -140,23 +142,6 @@ def modal_bounds(model: ModalModel, names: Sequence[str]) -> dict[str, tuple[flo
         low, high = sorted(value * s for s in spread)
         bounds[name] = (float(low), float(high))
     return bounds
-
-
-def _template(model: ModalModel) -> dict[str, float]:
-    """Every parameter's value in the template (names of :attr:`ModalModel.parameter_names`)."""
-    values = {}
-    for m, spec in enumerate(model.modes, start=1):
-        values[f"mode{m}.frequency_hz"] = spec.frequency_hz
-        values[f"mode{m}.damping_ratio"] = spec.damping_ratio
-        values[f"mode{m}.participation"] = spec.participation
-    for j, row in enumerate(model.joint_shapes, start=1):
-        for m, value in enumerate(row, start=1):
-            values[f"joint{j}.mode{m}"] = value
-    for element in model.elements:
-        values[element.label] = element.coefficient
-    for i, coupling in enumerate(model.couplings, start=1):
-        values[f"coupling{i}"] = coupling.coefficient
-    return values
 
 
 def _checked_modes(model: ModalModel, measured: Mapping[int, BackboneSet]) -> list[int]:
@@ -288,15 +273,8 @@ def modal_hierarchical_model(
     """
     modes = _checked_modes(model, measured)
     names = list(names or modal_update_names(model))
-    template = _template(model)
-    unknown = [n for n in names if n not in template]
-    if unknown:
-        raise ValueError(f"unknown parameter(s) {unknown}; the model has {list(template)}")
-    zero = [n for n in names if template[n] == 0]
-    if zero:
-        raise ValueError(f"parameters {zero} are 0 in the template: give them a value")
-    if not channels or any(c not in ("frequency_hz", "damping_ratio") for c in channels):
-        raise ValueError(f"channels must be 'frequency_hz' and/or 'damping_ratio', got {channels}")
+    template = template_values(model)
+    check_varying(template, names, channels)
     assemblies, owner = assembly_labels(measured)
     parts = []
     for g, m in enumerate(modes):

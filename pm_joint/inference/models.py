@@ -365,14 +365,7 @@ def hierarchical_model(
     """
     names = list(names)
     template = model.parameters
-    unknown = [n for n in names if n not in template]
-    if unknown:
-        raise ValueError(f"unknown parameter(s) {unknown}; the model has {list(template)}")
-    zero = [n for n in names if template[n] == 0]
-    if zero:
-        raise ValueError(f"parameters {zero} are 0 in the template: give them a value")
-    if not channels or any(c not in ("frequency_hz", "damping_ratio") for c in channels):
-        raise ValueError(f"channels must be 'frequency_hz' and/or 'damping_ratio', got {channels}")
+    check_varying(template, names, channels)
     curve, amplitude, values = curve_points(measured, amplitudes_m)
     theta0 = np.array([template[n] for n in names])
     gaps = {channel: np.zeros(amplitude.size) for channel in channels}
@@ -419,6 +412,21 @@ def hierarchical_model(
          "centred": pm_model.centred}
     )  # fmt: skip
     return pm_model
+
+
+def check_varying(
+    template: Mapping[str, float], names: Sequence[str], channels: Sequence[str]
+) -> None:
+    """A hierarchical model's varying parameters (known, not 0 in the template: θ = θ0 e^η)
+    and channels (frequency and/or damping ratio); ValueError naming what is wrong."""
+    unknown = [n for n in names if n not in template]
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {unknown}; the model has {list(template)}")
+    zero = [n for n in names if template[n] == 0]
+    if zero:
+        raise ValueError(f"parameters {zero} are 0 in the template: give them a value")
+    if not channels or any(c not in ("frequency_hz", "damping_ratio") for c in channels):
+        raise ValueError(f"channels must be 'frequency_hz' and/or 'damping_ratio', got {channels}")
 
 
 def observe_channel(
