@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -126,8 +127,10 @@ def run_two_modes(out: Path, size: str, stages) -> dict[str, dict]:
     for m in sorted(measured):
         folder = out / "posterior_modes" / f"mode{m}"
         density = stored_density(idata, DENSITY_ATTR_MODE.format(m))
-        content = stages.run(f"report of mode {m}", report, idata, measured[m], density=density,
-                             out=folder, name=f"backbone_mode{m}")  # fmt: skip
+        # The stage runner's own first argument is called name: the report's is bound here.
+        mode_report = partial(report, name=f"backbone_mode{m}")
+        content = stages.run(f"report of mode {m}", mode_report, idata, measured[m],
+                             density=density, out=folder)  # fmt: skip
         for section in posterior_sections(content, folder, out):
             section.title = f"Two modes: updating, mode {m} — {section.title}"
             stages.sections.append(section)
