@@ -149,7 +149,7 @@ def run_two_modes(out: Path, size: str, stages) -> dict[str, dict]:
         found = crit.second_mode
         answer = (
             f"the criticism of the one-mode model answers {crit.verdict!s}; second mode: "
-            f"{'named' if found.named else 'not named'} ({found.text()})"
+            f"{'named' if found.named else 'not named'} ({found.text})"
         )
         section = criticism_section(crit.to_dict(), out / "criticism_one_mode", out)
         section.title, section.text = title, f"{answer}\n\n{section.text}"
