@@ -475,14 +475,10 @@ def _update_modes(args: argparse.Namespace) -> int:
 
 def _extract_modes(workspace: Any, n_modes: int, args: argparse.Namespace) -> None:
     """The per-mode backbones a ModalModel is updated on, when the campaign has none yet."""
-    if args.test == "free-decay":
-        from pm_joint.pipeline import campaign_decay_modes
+    from pm_joint.pipeline import campaign_decay_modes, campaign_modal_backbones
 
-        campaign_decay_modes(workspace, n_modes)
-    else:
-        from pm_joint.pipeline import campaign_modal_backbones
-
-        campaign_modal_backbones(workspace, n_modes)
+    extract = campaign_decay_modes if args.test == "free-decay" else campaign_modal_backbones
+    extract(workspace, n_modes)
 
 
 def _cmd_report(args: argparse.Namespace) -> None:
