@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import sys
 import warnings
 from collections.abc import Iterator, Sequence
@@ -374,10 +375,11 @@ EXIT_NOT_CONVERGED = 3
 
 
 def _cmd_update(args: argparse.Namespace) -> int:
-    from pm_joint.analysis import convergence_verdict
     from pm_joint.pipeline import posterior_report, update_backbones
     from pm_joint.workspace import Workspace
 
+    if args.model and _is_modal_model(args.model):
+        return _update_modes(args)
     forward = args.forward or DEFAULT_FORWARD[args.population]
     if forward == "surrogate" and not args.surrogate:
         raise ValueError("--forward surrogate needs --surrogate SURROGATE_DIR")
@@ -398,17 +400,85 @@ def _cmd_update(args: argparse.Namespace) -> int:
     if args.report:
         posterior_report(workspace, args.report)
         print(f"wrote {args.report}/report.json")
+    return _verdict_exit(idata, args.out)
+
+
+def _verdict_exit(idata: Any, out: str) -> int:
+    """Print the convergence verdict of ``update``; its exit code (3 when not converged)."""
+    from pm_joint.analysis import convergence_verdict
+
     verdict = convergence_verdict(idata)
     print(f"convergence: {verdict.headline()}")
     if not verdict.converged:
         print(
-            f"pm-joint update: NOT CONVERGED: the posterior in {args.out} is not a result yet; "
+            f"pm-joint update: NOT CONVERGED: the posterior in {out} is not a result yet; "
             "continue it with --resume and more --draws (exit code "
             f"{EXIT_NOT_CONVERGED})",
             file=sys.stderr,
         )
         return EXIT_NOT_CONVERGED
     return 0
+
+
+def _is_modal_model(source: str) -> bool:
+    """Whether ``--model`` names a ModalModel JSON file (its versioned format says so)."""
+    from identification.multimode.model import FORMAT as MODAL_FORMAT
+
+    path = Path(source)
+    if path.suffix.lower() != ".json" or not path.is_file():
+        return False  # a preset name, or a file JointModel's reader reports on
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        return False
+    return isinstance(data, dict) and data.get("format") == MODAL_FORMAT
+
+
+def _update_modes(args: argparse.Namespace) -> int:
+    """``update`` with a ModalModel: every mode's backbones (the ``--modes N`` table)."""
+    from identification.multimode.model import ModalModel
+    from pm_joint.inference.modal import read_mode_backbones
+    from pm_joint.modal_update import DENSITY_ATTR_MODE, update_modes
+    from pm_joint.report_folder import report
+    from pm_joint.workspace import Workspace
+
+    if args.surrogate or args.forward not in (None, "harmonic"):
+        raise ValueError(
+            f"{args.model} is a ModalModel: it updates through its N-mode harmonic balance "
+            "graph (--forward harmonic, the default), not a surrogate or the PLL"
+        )
+    model = ModalModel.from_json(args.model)
+    workspace = Workspace(args.dir, **_workspace_options(args))
+    csv = workspace.backbones_csv
+    if not csv.is_file():
+        _extract_modes(workspace, model.n_modes, args)
+    measured = read_mode_backbones(csv)
+    sampler = args.sampler or sampler_defaults(args.population, "modal_harmonic").sampler
+    trace = args.trace or (None if sampler == "nutpie" else Path(args.out).with_suffix(".zarr"))
+    idata = update_modes(
+        model, measured, args.out, population=args.population, sampler=args.sampler,
+        draws=args.draws, tune=args.tune, chains=args.chains, seed=args.seed, trace=trace,
+        resume=args.resume,
+    )  # fmt: skip
+    print(f"wrote {args.out} (modes {', '.join(map(str, sorted(measured)))} of {args.model})")
+    print(f"sampler: {idata.attrs['sampler']} ({idata.attrs['sampler_reason']})")
+    if args.report:
+        from pm_joint.inference import stored_density
+
+        for m, backbones in measured.items():
+            folder = Path(args.report) / f"mode{m}"
+            density = stored_density(idata, DENSITY_ATTR_MODE.format(m))
+            report(idata, backbones, density=density, out=folder, name=f"backbone_mode{m}")
+            print(f"wrote {folder}/report.json")
+    return _verdict_exit(idata, args.out)
+
+
+def _extract_modes(workspace: Any, n_modes: int, args: argparse.Namespace) -> None:
+    """The per-mode backbones a ModalModel is updated on, when the campaign has none yet."""
+    from pm_joint.pipeline import campaign_decay_modes, campaign_modal_backbones
+
+    extract = campaign_decay_modes if args.test == "free-decay" else campaign_modal_backbones
+    extract(workspace, n_modes)
 
 
 def _cmd_report(args: argparse.Namespace) -> None:
@@ -433,7 +503,7 @@ def _cmd_predict(args: argparse.Namespace) -> None:
 def _cmd_demo(args: argparse.Namespace) -> int:
     from pm_joint.demo import run_demo
 
-    result = run_demo(out=args.out, size=args.size)
+    result = run_demo(out=args.out, size=args.size, case=args.case)
     if not result.converged:
         lines = "\n".join(f"  {line}" for line in result.not_converged())
         print(
@@ -611,7 +681,8 @@ def build_parser() -> argparse.ArgumentParser:
         "per-curve parameters from an estimated population, with a likelihood of every "
         "measured point (LOO) (default: matching)",
     )  # fmt: skip
-    p.add_argument("--model", help="model JSON file (for --forward harmonic|pll)")
+    p.add_argument("--model", help="model JSON file (for --forward harmonic|pll); a ModalModel "
+                   "JSON (identify --modes N) is updated on each mode's backbones")  # fmt: skip
     p.add_argument("--forward", choices=FORWARD_MODELS,
                    help=f"forward model (default: {forward_help()})")  # fmt: skip
     p.add_argument("--surrogate", help="surrogate folder (for --forward surrogate)")
@@ -668,6 +739,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--size", choices=("full", "small"), default="full",
         help="full: the paper-sized campaign; small: a quick check (default: full)",
+    )  # fmt: skip
+    p.add_argument(
+        "--case", choices=("one-mode", "two-modes"), default="one-mode",
+        help="one-mode: the TRC-like joint (default); two-modes: the two-mode virtual TRC "
+        "(per-mode backbones, identify --modes 2, two-mode updating, the criticism of a "
+        "one-mode model, held-out decays predicted by both)",
     )  # fmt: skip
     p.set_defaults(func=_cmd_demo)
     return parser

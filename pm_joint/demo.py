@@ -100,8 +100,16 @@ class DemoResult:
         return [f"{k}: {v['headline']}" for k, v in self.verdicts.items() if not v["converged"]]
 
 
+#: The demo's cases: today's one-mode chain, and the two-mode virtual TRC
+#: (:mod:`pm_joint.demo_modes`).
+CASES = ("one-mode", "two-modes")
+
+
 def run_demo(
-    out: str | Path = "demo_out", size: str = "full", workers: int | None = None
+    out: str | Path = "demo_out",
+    size: str = "full",
+    workers: int | None = None,
+    case: str = "one-mode",
 ) -> DemoResult:
     """Run the whole chain; returns the report page and the posteriors' verdicts.
 
@@ -112,10 +120,17 @@ def run_demo(
     """
     if size not in SIZES:
         raise ValueError(f"size must be one of {sorted(SIZES)}, got {size!r}")
+    if case not in CASES:
+        raise ValueError(f"case must be one of {CASES}, got {case!r}")
     cfg = SIZES[size]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     stages = _Stages()
+    if case == "two-modes":
+        from pm_joint.demo_modes import run_two_modes
+
+        verdicts = run_two_modes(out, size, stages)
+        return _finish(out, "pm-joint demo: two-mode virtual TRC", stages, verdicts)
     records = out / "records"
 
     stages.run(
@@ -214,8 +229,13 @@ def run_demo(
     stages.sections.append(criticism_section(crit.to_dict(), out / "criticism", out))
     print(rounds_text(crit.rounds))  # each round's finding, the final state last
 
+    return _finish(out, "pm-joint demo: virtual TRC campaign", stages, verdicts)
+
+
+def _finish(out: Path, title: str, stages: _Stages, verdicts: dict[str, dict]) -> DemoResult:
+    """The timings section, ``timings.json`` and the report page."""
     stages.sections.append(Section("Timings", tables=[("stage times (s)", [stages.timings])]))
     atomic_write_text(out / "timings.json", json.dumps(stages.timings, indent=2))
-    index = write_index(out, "pm-joint demo: virtual TRC campaign", stages.sections)
+    index = write_index(out, title, stages.sections)
     print(f"[pm-joint demo] report: {index}")
     return DemoResult(index, verdicts)

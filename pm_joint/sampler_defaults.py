@@ -72,6 +72,16 @@ SAMPLER_DEFAULTS = {
         reason="a parameter vector per curve (over a hundred dimensions): gradient "
         "samplers only, nutpie's NUTS the fastest",
     ),
+    ("matching", "modal_harmonic"): SamplerDefault(
+        "demetropolisz", draws=30_000, tune=5_000,
+        reason="the sampler of population matching on the one-mode harmonic balance, "
+        "whose N-mode twin this forward model is",
+    ),
+    ("hierarchical", "modal_harmonic"): SamplerDefault(
+        "nutpie", draws=1_000, tune=1_000,
+        reason="a parameter vector per assembly: gradient samplers only, nutpie's NUTS "
+        "the fastest",
+    ),
 }  # fmt: skip
 
 

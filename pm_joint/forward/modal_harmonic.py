@@ -94,6 +94,7 @@ __all__ = [
     "ModalBackboneTensors",
     "ModalHarmonicGraph",
     "modal_backbone_graph",
+    "template_values",
 ]
 
 #: Fixed-point iterations (steps of the graph's scan).
@@ -426,7 +427,10 @@ def modal_backbone_graph(
 
     # A scan, not an unrolled loop: the graph (and its compile time) stays one step long.
     start = [w[t] ** 2 + zero, zero] + [zero] * (2 * len(others))
-    steps = pytensor.scan(iteration, outputs_info=start, n_steps=iterations, return_updates=False)
+    # θ named as a non-sequence: traced implicitly, a PyMC prior's random draw would be copied
+    # into the loop (its RNG with it) instead of its value entering it.
+    steps = pytensor.scan(iteration, outputs_info=start, non_sequences=[theta], n_steps=iterations,
+                          return_updates=False)  # fmt: skip
     last = [s[-1] for s in steps]
     before = [s[-2] for s in steps]
     omega_squared, base = last[0], last[1]
@@ -487,10 +491,8 @@ def _stack_modes(per_mode: list[list[Any]]) -> pt.TensorVariable:
     return pt.stack(pt.broadcast_arrays(*rows), axis=-2)
 
 
-def _parameter_tensors(
-    model: ModalModel, theta: pt.TensorVariable, names: Sequence[str]
-) -> dict[str, Any]:
-    """Every parameter of ``model``: θ's column (with a trailing grid axis) or the template's."""
+def template_values(model: ModalModel) -> dict[str, float]:
+    """Every parameter's value in ``model``, by the names of :attr:`ModalModel.parameter_names`."""
     template = {}
     for m, spec in enumerate(model.modes, start=1):
         template[f"mode{m}.frequency_hz"] = spec.frequency_hz
@@ -503,6 +505,14 @@ def _parameter_tensors(
         template[element.label] = element.coefficient
     for i, coupling in enumerate(model.couplings, start=1):
         template[f"coupling{i}"] = coupling.coefficient
+    return template
+
+
+def _parameter_tensors(
+    model: ModalModel, theta: pt.TensorVariable, names: Sequence[str]
+) -> dict[str, Any]:
+    """Every parameter of ``model``: θ's column (with a trailing grid axis) or the template's."""
+    template = template_values(model)
     return {
         name: theta[..., list(names).index(name), None] if name in names else pt.constant(value)
         for name, value in template.items()

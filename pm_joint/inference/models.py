@@ -365,15 +365,8 @@ def hierarchical_model(
     """
     names = list(names)
     template = model.parameters
-    unknown = [n for n in names if n not in template]
-    if unknown:
-        raise ValueError(f"unknown parameter(s) {unknown}; the model has {list(template)}")
-    zero = [n for n in names if template[n] == 0]
-    if zero:
-        raise ValueError(f"parameters {zero} are 0 in the template: give them a value")
-    if not channels or any(c not in ("frequency_hz", "damping_ratio") for c in channels):
-        raise ValueError(f"channels must be 'frequency_hz' and/or 'damping_ratio', got {channels}")
-    curve, amplitude, values = _curve_points(measured, amplitudes_m)
+    check_varying(template, names, channels)
+    curve, amplitude, values = curve_points(measured, amplitudes_m)
     theta0 = np.array([template[n] for n in names])
     gaps = {channel: np.zeros(amplitude.size) for channel in channels}
     correction = None
@@ -395,7 +388,7 @@ def hierarchical_model(
     with pm.Model(coords=coords) as pm_model:
         mu = pm.Normal("log_mean", 0.0, location_scale, dims="parameter")
         sigma = pm.HalfNormal("log_spread", population_scale, dims="parameter")
-        eta = _population_draws(mu, sigma, centred, names)
+        eta = population_draws(mu, sigma, centred, names)
         theta = pm.Deterministic("theta", theta0 * pt.exp(eta), dims=("curve", "parameter"))
         for j, name in enumerate(names):
             pm.Deterministic(f"{name}{POPULATION_SUFFIX}", theta0[j] * pt.exp(mu[j]))
@@ -404,25 +397,11 @@ def hierarchical_model(
         pm.Data("amplitude_m", amplitude, dims="point")
         pm.Data("curve_index", curve, dims="point")
         for channel in channels:
-            # Data: the values scored and the gap subtracted from them travel with the
-            # posterior (its constant data).
-            pm.Data(f"{channel}_truncation", gaps[channel], dims="point")
-            scored = values[channel] - gaps[channel]
-            observed = pm.Data(f"{channel}_measured", scored, dims="point")
             predicted = backbone[:, BACKBONE_COLUMNS.index(channel)]
-            relative = channel in relative_noise
-            logs = np.log(np.abs(values[channel]))  # a measured 0 has no log: left out
-            spread = np.std(logs[np.isfinite(logs)]) if relative else np.std(values[channel])
-            noise = pm.HalfNormal(f"{channel}_noise", spread)
-            if heteroscedastic:
-                slope = pm.Normal(f"{channel}_noise_slope", 0.0, 1.0)
-                noise = noise * pt.exp(slope * log_relative_amplitude)
-            if relative:
-                # Scaled by the measured value, not the predicted one: a noise that follows
-                # the prediction lets the sampler trade fit for noise (chains that diverge
-                # and do not mix); at 2 % noise the two scales differ by about 2 %.
-                noise = noise * np.abs(scored)
-            pm.Normal(channel, predicted, noise, observed=observed, dims="point")
+            observe_channel(
+                channel, predicted, values[channel], gaps[channel], log_relative_amplitude,
+                heteroscedastic=heteroscedastic, relative=channel in relative_noise,
+            )  # fmt: skip
     pm_model.population_model = HIERARCHICAL  # sample() keeps it with the draws
     pm_model.template = model
     pm_model.varying = names
@@ -435,7 +414,72 @@ def hierarchical_model(
     return pm_model
 
 
-def _population_draws(
+def check_varying(
+    template: Mapping[str, float], names: Sequence[str], channels: Sequence[str]
+) -> None:
+    """A hierarchical model's varying parameters (known, not 0 in the template: θ = θ0 e^η)
+    and channels (frequency and/or damping ratio); ValueError naming what is wrong."""
+    unknown = [n for n in names if n not in template]
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {unknown}; the model has {list(template)}")
+    zero = [n for n in names if template[n] == 0]
+    if zero:
+        raise ValueError(f"parameters {zero} are 0 in the template: give them a value")
+    if not channels or any(c not in ("frequency_hz", "damping_ratio") for c in channels):
+        raise ValueError(f"channels must be 'frequency_hz' and/or 'damping_ratio', got {channels}")
+
+
+def observe_channel(
+    channel: str,
+    predicted: pt.TensorVariable,
+    values: np.ndarray,
+    gaps: np.ndarray,
+    log_relative_amplitude: np.ndarray,
+    *,
+    heteroscedastic: bool,
+    relative: bool,
+    groups: np.ndarray | None = None,
+) -> None:
+    """The observed variable ``channel`` (dims ``point``) of a hierarchical model and its noise.
+
+    The measured ``values`` less ``gaps`` are Normal around ``predicted`` with the noise
+    of :func:`hierarchical_model` (``{channel}_noise``, with ``heteroscedastic`` its slope
+    ``{channel}_noise_slope``, with ``relative`` scaled by the measured value). ``groups``
+    (an integer per point, dims ``group`` in the model's coordinates) gives every group of
+    points its own noise and slope, as the modes of an N-mode model need (a frequency noise
+    in Hz of one mode says nothing of another's); None: one of each, as for one mode.
+    """
+    # Data: the values scored and the gap subtracted from them travel with the
+    # posterior (its constant data).
+    pm.Data(f"{channel}_truncation", gaps, dims="point")
+    scored = values - gaps
+    observed = pm.Data(f"{channel}_measured", scored, dims="point")
+    logs = np.log(np.abs(values))  # a measured 0 has no log: left out
+    parts = [np.ones(values.size, bool)] if groups is None else [
+        groups == g for g in range(int(groups.max()) + 1)
+    ]  # fmt: skip
+    spread = [
+        np.std(logs[p][np.isfinite(logs[p])]) if relative else np.std(values[p]) for p in parts
+    ]
+    if groups is None:
+        noise = pm.HalfNormal(f"{channel}_noise", spread[0])
+    else:
+        noise = pm.HalfNormal(f"{channel}_noise", np.array(spread), dims="group")[groups]
+    if heteroscedastic:
+        if groups is None:
+            slope = pm.Normal(f"{channel}_noise_slope", 0.0, 1.0)
+        else:
+            slope = pm.Normal(f"{channel}_noise_slope", 0.0, 1.0, dims="group")[groups]
+        noise = noise * pt.exp(slope * log_relative_amplitude)
+    if relative:
+        # Scaled by the measured value, not the predicted one: a noise that follows
+        # the prediction lets the sampler trade fit for noise (chains that diverge
+        # and do not mix); at 2 % noise the two scales differ by about 2 %.
+        noise = noise * np.abs(scored)
+    pm.Normal(channel, predicted, noise, observed=observed, dims="point")
+
+
+def population_draws(
     mu: pt.TensorVariable, sigma: pt.TensorVariable, centred: np.ndarray, names: Sequence[str]
 ) -> pt.TensorVariable:
     """``η`` (curve × parameter): centred columns as the variable ``eta``, the others as
@@ -455,7 +499,7 @@ def _population_draws(
     return pt.set_subtensor(eta[:, others], mu[others] + sigma[others] * z)
 
 
-def _curve_points(
+def curve_points(
     measured: BackboneSet, amplitudes_m: ArrayLike | None
 ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """Curve index, amplitude (m) and channel values of every point, flat.

@@ -102,12 +102,15 @@ def load_posterior(path: str | os.PathLike) -> xr.DataTree:
     return idata
 
 
-def attach_density(idata: xr.DataTree, density: BackboneDensity) -> None:
-    """Keep ``density`` in the DataTree's attributes (JSON) for :func:`stored_density`."""
-    idata.attrs[DENSITY_ATTR] = json.dumps(density.to_dict())
+def attach_density(
+    idata: xr.DataTree, density: BackboneDensity, attribute: str = DENSITY_ATTR
+) -> None:
+    """Keep ``density`` in the DataTree's attributes (JSON) for :func:`stored_density`
+    (``attribute``: another name, for one density of several)."""
+    idata.attrs[attribute] = json.dumps(density.to_dict())
 
 
-def stored_density(idata: xr.DataTree) -> BackboneDensity | None:
+def stored_density(idata: xr.DataTree, attribute: str = DENSITY_ATTR) -> BackboneDensity | None:
     """The likelihood density stored with the draws; None if there is none.
 
     :func:`~pm_joint.inference.sampling.sample` attaches the density of a
@@ -117,5 +120,5 @@ def stored_density(idata: xr.DataTree) -> BackboneDensity | None:
     Posteriors written before the density was stored have none: their levels
     cannot be known for sure, so the caller decides what to fall back on.
     """
-    text = idata.attrs.get(DENSITY_ATTR)
+    text = idata.attrs.get(attribute)
     return None if text is None else BackboneDensity.from_dict(json.loads(text))

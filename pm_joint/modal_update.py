@@ -1,0 +1,111 @@
+"""``pm-joint update`` of an N-mode ModalModel on a campaign's per-mode backbones.
+
+The N-mode twin of :func:`pm_joint.pipeline.update_backbones`: the same samplers
+(:func:`~pm_joint.inference.sample`, defaults from
+:data:`~pm_joint.sampler_defaults.SAMPLER_DEFAULTS` on the forward model
+``modal_harmonic``), the same convergence verdict, the same posterior file and
+attributes; the models are those of :mod:`pm_joint.inference.modal`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import warnings
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import xarray as xr
+
+from identification.measurements.backbone import BackboneSet
+from identification.multimode.model import ModalModel
+from pm_joint.analysis import convergence_verdict, loo
+from pm_joint.inference import continue_sampling, sample, save_posterior
+from pm_joint.inference.modal import (
+    MODAL_FORWARD,
+    build_modal_model,
+    modal_hierarchical_model,
+)
+from pm_joint.inference.storage import attach_density
+from pm_joint.sampler_defaults import sampler_defaults, sampler_reason
+
+__all__ = ["DENSITY_ATTR_MODE", "update_modes"]
+
+#: Attribute of a saved N-mode posterior holding mode m's likelihood density (``.format(m)``).
+DENSITY_ATTR_MODE = "pm_joint_density_mode{}"
+
+
+def update_modes(
+    model: ModalModel,
+    measured: Mapping[int, BackboneSet],
+    out: str | os.PathLike,
+    *,
+    population: str = "matching",
+    names: Sequence[str] | None = None,
+    channels: Sequence[str] = ("frequency_hz", "damping_ratio"),
+    sampler: str | None = None,
+    draws: int | None = None,
+    tune: int | None = None,
+    chains: int = 2,
+    seed: int = 0,
+    trace: str | os.PathLike | None = None,
+    resume: bool = False,
+    progressbar: bool = True,
+) -> xr.DataTree:
+    """Update ``model`` on each mode's backbones; saves the posterior (netCDF) to ``out``.
+
+    ``population`` ``"matching"`` (:func:`~pm_joint.inference.modal.build_modal_model`) or
+    ``"hierarchical"`` (:func:`~pm_joint.inference.modal.modal_hierarchical_model`, with
+    its LOO);
+    ``trace``/``resume`` as for one mode. The posterior carries its convergence verdict
+    (attribute ``convergence``), the sampler and why, and each mode's likelihood density
+    (attributes :data:`DENSITY_ATTR_MODE`).
+    """
+    defaults = sampler_defaults(population, MODAL_FORWARD)
+    sampler = sampler or defaults.sampler
+    draws = draws or defaults.draws
+    tune = tune or defaults.tune
+    earlier_run = trace is not None and Path(trace).exists()
+    if earlier_run and not resume:
+        raise ValueError(
+            f"{trace} holds the draws of an earlier run: resume it, or remove it to start again"
+        )
+    if population == "hierarchical":
+        pm_model = modal_hierarchical_model(model, measured, names, channels=channels)
+    else:
+        pm_model = build_modal_model(model, measured, names=names, channels=channels)
+    if earlier_run:
+        idata = continue_sampling(pm_model, trace, draws=draws, sampler=sampler)
+    else:
+        idata = sample(
+            pm_model, sampler=sampler, draws=draws, tune=tune, chains=chains, random_seed=seed,
+            trace=trace, progressbar=progressbar,
+        )  # fmt: skip
+    idata.attrs["convergence"] = json.dumps(convergence_verdict(idata).to_dict())
+    idata.attrs["modes"] = json.dumps(sorted(measured))
+    if population == "hierarchical":
+        try:
+            result = loo(idata, pm_model)
+            idata.attrs["loo"] = json.dumps(
+                {"elpd_loo": float(result.elpd), "se": float(result.se), "p_loo": float(result.p)}
+            )
+        except ValueError as error:  # as for one mode: PSIS may fail on short runs
+            idata.attrs["loo"] = json.dumps(f"not computed, arviz's PSIS failed: {error}")
+            warnings.warn(f"LOO not computed: {error}", stacklevel=2)
+        idata.attrs["varying_parameters"] = json.dumps(list(pm_model.varying))
+    else:
+        # No identifiability check as for one mode: its Jacobian compiles each mode's graph
+        # again (minutes for the loop of the N-mode graph).
+        for m, density in pm_model.backbone_densities.items():
+            attach_density(idata, density, attribute=DENSITY_ATTR_MODE.format(m))
+    reason = sampler_reason(population, MODAL_FORWARD, sampler)
+    idata.attrs["sampler_reason"] = reason
+    metadata = {
+        "forward": MODAL_FORWARD,
+        "sampler": sampler,
+        "sampler_reason": reason,
+        "population_model": pm_model.population_model,
+        "modal_model": model.name or "ModalModel",
+    }
+    save_posterior(idata, out, metadata=metadata)
+    return idata
