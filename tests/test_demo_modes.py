@@ -18,7 +18,8 @@ from pm_joint.cli import EXIT_NOT_CONVERGED
 from pm_joint.html import missing_links
 
 
-@pytest.mark.heavy
+# Slow: the N-mode graph's scan compiles for minutes on a cold cache (CI's).
+@pytest.mark.slow
 def test_two_modes_demo_runs_end_to_end_at_small_size(tmp_path):
     argv = ["demo", "--case", "two-modes", "--size", "small", "--out", str(tmp_path)]
     done = subprocess.run([sys.executable, "-m", "pm_joint.cli", *argv], capture_output=True,
