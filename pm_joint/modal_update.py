@@ -13,7 +13,6 @@ import json
 import os
 import warnings
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 
 import xarray as xr
 
@@ -27,7 +26,7 @@ from pm_joint.inference.modal import (
     modal_hierarchical_model,
 )
 from pm_joint.inference.storage import attach_density
-from pm_joint.sampler_defaults import sampler_defaults, sampler_reason
+from pm_joint.sampler_defaults import earlier_trace, run_settings, sampler_reason
 
 __all__ = ["DENSITY_ATTR_MODE", "update_modes"]
 
@@ -61,15 +60,8 @@ def update_modes(
     (attribute ``convergence``), the sampler and why, and each mode's likelihood density
     (attributes :data:`DENSITY_ATTR_MODE`).
     """
-    defaults = sampler_defaults(population, MODAL_FORWARD)
-    sampler = sampler or defaults.sampler
-    draws = draws or defaults.draws
-    tune = tune or defaults.tune
-    earlier_run = trace is not None and Path(trace).exists()
-    if earlier_run and not resume:
-        raise ValueError(
-            f"{trace} holds the draws of an earlier run: resume it, or remove it to start again"
-        )
+    sampler, draws, tune = run_settings(population, MODAL_FORWARD, sampler, draws, tune)
+    earlier_run = earlier_trace(trace, resume)
     if population == "hierarchical":
         pm_model = modal_hierarchical_model(model, measured, names, channels=channels)
     else:

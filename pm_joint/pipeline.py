@@ -65,7 +65,12 @@ from pm_joint.inference import (
 )
 from pm_joint.inference.varying import varying_parameters
 from pm_joint.report_folder import report
-from pm_joint.sampler_defaults import GRADIENT_SAMPLERS, sampler_defaults, sampler_reason
+from pm_joint.sampler_defaults import (
+    GRADIENT_SAMPLERS,
+    earlier_trace,
+    run_settings,
+    sampler_reason,
+)
 from pm_joint.workspace import Workspace
 from surrogates.dataset import add_measured, generate_dataset, record_labels
 from surrogates.grid import GRID_CHANNELS, assembly_scatter, measured_grid
@@ -560,15 +565,8 @@ def update_backbones(
     convergence verdict (attribute ``convergence``, JSON); the workspace's
     posterior becomes the returned DataTree.
     """
-    defaults = sampler_defaults(population, forward)
-    sampler = sampler or defaults.sampler
-    draws = draws or defaults.draws
-    tune = tune or defaults.tune
-    earlier_run = trace is not None and Path(trace).exists()
-    if earlier_run and not resume:
-        raise ValueError(
-            f"{trace} holds the draws of an earlier run: resume it, or remove it to start again"
-        )
+    sampler, draws, tune = run_settings(population, forward, sampler, draws, tune)
+    earlier_run = earlier_trace(trace, resume)
     measured = workspace.backbones
     density = surrogate = None
     if population == "hierarchical":

@@ -6,7 +6,9 @@ Light on purpose (no PyMC import): ``pm-joint --help`` builds its text from it.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 __all__ = [
     "DEFAULT_FORWARD",
@@ -94,6 +96,25 @@ def sampler_defaults(population: str, forward: str) -> SamplerDefault:
         raise ValueError(f"population model {population!r} does not run on forward model "
                          f"{forward!r}; it runs on: {runs_on}")  # fmt: skip
     return SAMPLER_DEFAULTS[population, forward]
+
+
+def run_settings(
+    population: str, forward: str, sampler: str | None, draws: int | None, tune: int | None
+) -> tuple[str, int, int]:
+    """The sampler, draws and tuning steps of a run: those given, else the pair's defaults."""
+    defaults = sampler_defaults(population, forward)
+    return sampler or defaults.sampler, draws or defaults.draws, tune or defaults.tune
+
+
+def earlier_trace(trace: str | os.PathLike | None, resume: bool) -> bool:
+    """Whether ``trace`` holds an earlier run's draws; a ValueError where it does and
+    ``resume`` is not asked (an earlier run is continued or removed, never overwritten)."""
+    earlier = trace is not None and Path(trace).exists()
+    if earlier and not resume:
+        raise ValueError(
+            f"{trace} holds the draws of an earlier run: resume it, or remove it to start again"
+        )
+    return earlier
 
 
 def sampler_reason(population: str, forward: str, sampler: str) -> str:

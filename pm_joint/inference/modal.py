@@ -49,11 +49,10 @@ from pm_joint.forward.modal_harmonic import template_values
 from pm_joint.inference.models import (
     HIERARCHICAL,
     POPULATION_MATCHING,
-    POPULATION_SUFFIX,
     check_varying,
     curve_points,
     observe_channel,
-    population_draws,
+    population_theta,
     uniform_priors,
 )
 
@@ -297,12 +296,7 @@ def modal_hierarchical_model(
     coords = {"curve": assemblies, "parameter": names, "point": np.arange(amplitude.size),
               "group": [f"mode {m}" for m in modes]}  # fmt: skip
     with pm.Model(coords=coords) as pm_model:
-        mu = pm.Normal("log_mean", 0.0, location_scale, dims="parameter")
-        sigma = pm.HalfNormal("log_spread", population_scale, dims="parameter")
-        eta = population_draws(mu, sigma, centred, names)
-        theta = pm.Deterministic("theta", theta0 * pt.exp(eta), dims=("curve", "parameter"))
-        for j, name in enumerate(names):
-            pm.Deterministic(f"{name}{POPULATION_SUFFIX}", theta0[j] * pt.exp(mu[j]))
+        theta = population_theta(theta0, names, location_scale, population_scale, centred)
         predicted = {c: [] for c in channels}
         for m, _, grid, curve, level, _, _ in parts:
             # Every assembly on the mode's levels, then each point picked from its own.

@@ -386,12 +386,7 @@ def hierarchical_model(
     log_relative_amplitude = np.log(amplitude) - np.mean(np.log(amplitude))
     coords = {"curve": measured.labels, "parameter": names, "point": np.arange(amplitude.size)}
     with pm.Model(coords=coords) as pm_model:
-        mu = pm.Normal("log_mean", 0.0, location_scale, dims="parameter")
-        sigma = pm.HalfNormal("log_spread", population_scale, dims="parameter")
-        eta = population_draws(mu, sigma, centred, names)
-        theta = pm.Deterministic("theta", theta0 * pt.exp(eta), dims=("curve", "parameter"))
-        for j, name in enumerate(names):
-            pm.Deterministic(f"{name}{POPULATION_SUFFIX}", theta0[j] * pt.exp(mu[j]))
+        theta = population_theta(theta0, names, location_scale, population_scale, centred)
         # Each curve at its own points only (not every curve at every curve's points).
         backbone = harmonic_backbone_graph(model, theta[curve], names, amplitude, pointwise=True)
         pm.Data("amplitude_m", amplitude, dims="point")
@@ -477,6 +472,26 @@ def observe_channel(
         # and do not mix); at 2 % noise the two scales differ by about 2 %.
         noise = noise * np.abs(scored)
     pm.Normal(channel, predicted, noise, observed=observed, dims="point")
+
+
+def population_theta(
+    theta0: np.ndarray,
+    names: Sequence[str],
+    location_scale: float,
+    population_scale: float,
+    centred: np.ndarray,
+) -> pt.TensorVariable:
+    """Each curve's parameters ``θ = θ₀ exp(η)`` (curve × parameter) of the hierarchical
+    population: ``log_mean`` μ, ``log_spread`` σ, η by :func:`population_draws`, and each
+    parameter's population value ``θ₀ exp(μ)`` as ``{name}{POPULATION_SUFFIX}``. Inside a
+    ``pm.Model`` with the coords ``curve`` and ``parameter``."""
+    mu = pm.Normal("log_mean", 0.0, location_scale, dims="parameter")
+    sigma = pm.HalfNormal("log_spread", population_scale, dims="parameter")
+    eta = population_draws(mu, sigma, centred, names)
+    theta = pm.Deterministic("theta", theta0 * pt.exp(eta), dims=("curve", "parameter"))
+    for j, name in enumerate(names):
+        pm.Deterministic(f"{name}{POPULATION_SUFFIX}", theta0[j] * pt.exp(mu[j]))
+    return theta
 
 
 def population_draws(
