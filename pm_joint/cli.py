@@ -387,9 +387,7 @@ def _cmd_update(args: argparse.Namespace) -> int:
         raise ValueError(f"--forward {forward} needs --model model.json")
     workspace = Workspace(args.dir, model=args.model, surrogate=args.surrogate,
                           **_workspace_options(args))  # fmt: skip
-    sampler = args.sampler or sampler_defaults(args.population, forward).sampler
-    # nutpie keeps its draws in memory: no trace folder unless one is asked for (then refused).
-    trace = args.trace or (None if sampler == "nutpie" else Path(args.out).with_suffix(".zarr"))
+    trace = _trace_folder(args, forward)
     idata = update_backbones(
         workspace, args.out, population=args.population, forward=forward,
         sampler=args.sampler, draws=args.draws, tune=args.tune, chains=args.chains,
@@ -420,6 +418,15 @@ def _verdict_exit(idata: Any, out: str) -> int:
     return 0
 
 
+def _trace_folder(args: argparse.Namespace, forward: str) -> str | Path | None:
+    """``update``'s trace folder: ``--trace``, else the output's name with ``.zarr``; none
+    for nutpie, which keeps its draws in memory (a folder asked for is then refused)."""
+    if args.trace:
+        return args.trace
+    sampler = args.sampler or sampler_defaults(args.population, forward).sampler
+    return None if sampler == "nutpie" else Path(args.out).with_suffix(".zarr")
+
+
 def _is_modal_model(source: str) -> bool:
     """Whether ``--model`` names a ModalModel JSON file (its versioned format says so)."""
     from identification.multimode.model import FORMAT as MODAL_FORMAT
@@ -437,9 +444,8 @@ def _is_modal_model(source: str) -> bool:
 def _update_modes(args: argparse.Namespace) -> int:
     """``update`` with a ModalModel: every mode's backbones (the ``--modes N`` table)."""
     from identification.multimode.model import ModalModel
-    from pm_joint.inference.modal import read_mode_backbones
-    from pm_joint.modal_update import DENSITY_ATTR_MODE, update_modes
-    from pm_joint.report_folder import report
+    from pm_joint.inference.modal import MODAL_FORWARD, read_mode_backbones
+    from pm_joint.modal_update import mode_report, update_modes
     from pm_joint.workspace import Workspace
 
     if args.surrogate or args.forward not in (None, "harmonic"):
@@ -453,8 +459,7 @@ def _update_modes(args: argparse.Namespace) -> int:
     if not csv.is_file():
         _extract_modes(workspace, model.n_modes, args)
     measured = read_mode_backbones(csv)
-    sampler = args.sampler or sampler_defaults(args.population, "modal_harmonic").sampler
-    trace = args.trace or (None if sampler == "nutpie" else Path(args.out).with_suffix(".zarr"))
+    trace = _trace_folder(args, MODAL_FORWARD)
     idata = update_modes(
         model, measured, args.out, population=args.population, sampler=args.sampler,
         draws=args.draws, tune=args.tune, chains=args.chains, seed=args.seed, trace=trace,
@@ -463,12 +468,9 @@ def _update_modes(args: argparse.Namespace) -> int:
     print(f"wrote {args.out} (modes {', '.join(map(str, sorted(measured)))} of {args.model})")
     print(f"sampler: {idata.attrs['sampler']} ({idata.attrs['sampler_reason']})")
     if args.report:
-        from pm_joint.inference import stored_density
-
-        for m, backbones in measured.items():
+        for m in measured:
             folder = Path(args.report) / f"mode{m}"
-            density = stored_density(idata, DENSITY_ATTR_MODE.format(m))
-            report(idata, backbones, density=density, out=folder, name=f"backbone_mode{m}")
+            mode_report(idata, measured, m, folder)
             print(f"wrote {folder}/report.json")
     return _verdict_exit(idata, args.out)
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -29,10 +28,8 @@ from identification.sindy.modal_identify import identify_modes
 from pm_joint import pipeline
 from pm_joint.html import Section, criticism_section, posterior_sections
 from pm_joint.inference.modal import read_mode_backbones
-from pm_joint.inference.storage import stored_density
-from pm_joint.modal_update import DENSITY_ATTR_MODE, update_modes
+from pm_joint.modal_update import mode_report, update_modes
 from pm_joint.predict import predict_record
-from pm_joint.report_folder import report
 from pm_joint.workspace import Workspace
 
 __all__ = ["MODE_SIZES", "TwoModeSize", "run_two_modes"]
@@ -126,11 +123,7 @@ def run_two_modes(out: Path, size: str, stages) -> dict[str, dict]:
     verdict = json.loads(idata.attrs["convergence"])
     for m in sorted(measured):
         folder = out / "posterior_modes" / f"mode{m}"
-        density = stored_density(idata, DENSITY_ATTR_MODE.format(m))
-        # The stage runner's own first argument is called name: the report's is bound here.
-        mode_report = partial(report, name=f"backbone_mode{m}")
-        content = stages.run(f"report of mode {m}", mode_report, idata, measured[m],
-                             density=density, out=folder)  # fmt: skip
+        content = stages.run(f"report of mode {m}", mode_report, idata, measured, m, folder)
         for section in posterior_sections(content, folder, out):
             section.title = f"Two modes: updating, mode {m} — {section.title}"
             stages.sections.append(section)

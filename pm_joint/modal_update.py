@@ -11,24 +11,26 @@ from __future__ import annotations
 
 import json
 import os
-import warnings
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import xarray as xr
 
 from identification.measurements.backbone import BackboneSet
 from identification.multimode.model import ModalModel
-from pm_joint.analysis import convergence_verdict, loo
+from pm_joint.analysis import attach_loo, convergence_verdict
 from pm_joint.inference import continue_sampling, sample, save_posterior
 from pm_joint.inference.modal import (
     MODAL_FORWARD,
     build_modal_model,
     modal_hierarchical_model,
 )
-from pm_joint.inference.storage import attach_density
-from pm_joint.sampler_defaults import earlier_trace, run_settings, sampler_reason
+from pm_joint.inference.storage import attach_density, stored_density
+from pm_joint.inference.traces import earlier_trace
+from pm_joint.report_folder import report
+from pm_joint.sampler_defaults import run_settings, sampler_reason
 
-__all__ = ["DENSITY_ATTR_MODE", "update_modes"]
+__all__ = ["DENSITY_ATTR_MODE", "mode_report", "update_modes"]
 
 #: Attribute of a saved N-mode posterior holding mode m's likelihood density (``.format(m)``).
 DENSITY_ATTR_MODE = "pm_joint_density_mode{}"
@@ -76,14 +78,7 @@ def update_modes(
     idata.attrs["convergence"] = json.dumps(convergence_verdict(idata).to_dict())
     idata.attrs["modes"] = json.dumps(sorted(measured))
     if population == "hierarchical":
-        try:
-            result = loo(idata, pm_model)
-            idata.attrs["loo"] = json.dumps(
-                {"elpd_loo": float(result.elpd), "se": float(result.se), "p_loo": float(result.p)}
-            )
-        except ValueError as error:  # as for one mode: PSIS may fail on short runs
-            idata.attrs["loo"] = json.dumps(f"not computed, arviz's PSIS failed: {error}")
-            warnings.warn(f"LOO not computed: {error}", stacklevel=2)
+        attach_loo(idata, pm_model)
         idata.attrs["varying_parameters"] = json.dumps(list(pm_model.varying))
     else:
         # No identifiability check as for one mode: its Jacobian compiles each mode's graph
@@ -101,3 +96,13 @@ def update_modes(
     }
     save_posterior(idata, out, metadata=metadata)
     return idata
+
+
+def mode_report(
+    idata: xr.DataTree, measured: Mapping[int, BackboneSet], mode: int, out: str | os.PathLike
+) -> dict[str, Any]:
+    """The one-mode report folder (:func:`pm_joint.report_folder.report`) of ``mode``'s
+    potential ``backbone_mode{m}``: its measured backbones under the density stored with
+    the draws; returns the report's content."""
+    density = stored_density(idata, DENSITY_ATTR_MODE.format(mode))
+    return report(idata, measured[mode], density=density, out=out, name=f"backbone_mode{mode}")

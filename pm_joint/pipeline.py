@@ -54,7 +54,12 @@ from identification.sindy import (
     validate,
 )
 from pm_joint import html, plotting
-from pm_joint.analysis import convergence_verdict, identifiability, loo, population_predictive
+from pm_joint.analysis import (
+    attach_loo,
+    convergence_verdict,
+    identifiability,
+    population_predictive,
+)
 from pm_joint.inference import (
     amplitudes_within_surrogate,
     build_model,
@@ -63,11 +68,11 @@ from pm_joint.inference import (
     sample,
     save_posterior,
 )
+from pm_joint.inference.traces import earlier_trace
 from pm_joint.inference.varying import varying_parameters
 from pm_joint.report_folder import report
 from pm_joint.sampler_defaults import (
     GRADIENT_SAMPLERS,
-    earlier_trace,
     run_settings,
     sampler_reason,
 )
@@ -629,24 +634,7 @@ def update_backbones(
 
 def _hierarchical_extras(idata, pm_model, model, names, channels, measured) -> None:
     """LOO (attribute ``loo``) and new assemblies (group ``posterior_predictive``)."""
-    try:
-        result = loo(idata, pm_model)
-    except ValueError as error:
-        # arviz's PSIS cannot fit a Pareto tail where a point's log-likelihood takes one value
-        # over the tail's draws (seen on short runs); the report says so instead of a number.
-        idata.attrs["loo"] = json.dumps(f"not computed, arviz's PSIS failed: {error}")
-        warnings.warn(f"LOO not computed: {error}", stacklevel=2)
-    else:
-        pareto_k = np.asarray(result.pareto_k).ravel()
-        idata.attrs["loo"] = json.dumps(
-            {
-                "elpd_loo": float(result.elpd),
-                "se": float(result.se),
-                "p_loo": float(result.p),
-                "n_points": int(pareto_k.size),
-                "pareto_k_above_0.7": int(np.sum(pareto_k > 0.7)),
-            }
-        )
+    attach_loo(idata, pm_model)
     low = min(b.amplitude_range_m[0] for b in measured)
     high = max(b.amplitude_range_m[1] for b in measured)
     new = population_predictive(idata, model, names, np.geomspace(low, high, 41),

@@ -6,9 +6,7 @@ Light on purpose (no PyMC import): ``pm-joint --help`` builds its text from it.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
-from pathlib import Path
 
 __all__ = [
     "DEFAULT_FORWARD",
@@ -104,17 +102,6 @@ def run_settings(
     """The sampler, draws and tuning steps of a run: those given, else the pair's defaults."""
     defaults = sampler_defaults(population, forward)
     return sampler or defaults.sampler, draws or defaults.draws, tune or defaults.tune
-
-
-def earlier_trace(trace: str | os.PathLike | None, resume: bool) -> bool:
-    """Whether ``trace`` holds an earlier run's draws; a ValueError where it does and
-    ``resume`` is not asked (an earlier run is continued or removed, never overwritten)."""
-    earlier = trace is not None and Path(trace).exists()
-    if earlier and not resume:
-        raise ValueError(
-            f"{trace} holds the draws of an earlier run: resume it, or remove it to start again"
-        )
-    return earlier
 
 
 def sampler_reason(population: str, forward: str, sampler: str) -> str:

@@ -21,7 +21,12 @@ from pm_joint.analysis.levels import (
     predicted_values,
     thin_rows,
 )
-from pm_joint.analysis.population import identifiability, loo, population_predictive
+from pm_joint.analysis.population import (
+    attach_loo,
+    identifiability,
+    loo,
+    population_predictive,
+)
 from pm_joint.analysis.summaries import (
     CI_PROB,
     SAMPLE_DIMS,
@@ -41,6 +46,7 @@ __all__ = [
     "SAMPLE_DIMS",
     "ConvergenceVerdict",
     "UnmovedDraws",
+    "attach_loo",
     "checked_predictions",
     "convergence_verdict",
     "correlation_matrix",

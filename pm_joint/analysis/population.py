@@ -18,6 +18,7 @@ there is none, and new assemblies drawn from the hierarchical population.
 from __future__ import annotations
 
 import json
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -31,7 +32,7 @@ from identification.model import JointModel
 from pm_joint.analysis.summaries import SAMPLE_DIMS, group_dataset
 from pm_joint.inference.models import POPULATION_MATCHING, POPULATION_SUFFIX
 
-__all__ = ["identifiability", "loo", "population_predictive"]
+__all__ = ["attach_loo", "identifiability", "loo", "population_predictive"]
 
 
 def loo(idata: xr.DataTree, pm_model: pm.Model | None = None) -> Any:
@@ -72,6 +73,29 @@ def loo(idata: xr.DataTree, pm_model: pm.Model | None = None) -> Any:
         )
         return az.loo(tree, var_name="points", pointwise=True)
     return az.loo(idata, var_name=channels[0], pointwise=True)
+
+
+def attach_loo(idata: xr.DataTree, pm_model: pm.Model) -> None:
+    """:func:`loo`'s summary as ``idata``'s attribute ``loo`` (JSON): ELPD, its standard
+    error, ``p_loo``, the points and how many have a Pareto k above 0.7; where arviz's PSIS
+    cannot fit a Pareto tail (a point whose log-likelihood takes one value over the tail's
+    draws, seen on short runs), why, and a warning: the report says so instead of a number."""
+    try:
+        result = loo(idata, pm_model)
+    except ValueError as error:
+        idata.attrs["loo"] = json.dumps(f"not computed, arviz's PSIS failed: {error}")
+        warnings.warn(f"LOO not computed: {error}", stacklevel=3)
+        return
+    pareto_k = np.asarray(result.pareto_k).ravel()
+    idata.attrs["loo"] = json.dumps(
+        {
+            "elpd_loo": float(result.elpd),
+            "se": float(result.se),
+            "p_loo": float(result.p),
+            "n_points": int(pareto_k.size),
+            "pareto_k_above_0.7": int(np.sum(pareto_k > 0.7)),
+        }
+    )
 
 
 def identifiability(

@@ -35,6 +35,7 @@ import json
 import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -243,6 +244,31 @@ def assembly_labels(measured: Mapping[int, BackboneSet]) -> tuple[list[str], dic
     return assemblies, index
 
 
+class _ModePoints(NamedTuple):
+    """One mode's points in the hierarchical model: its amplitude levels ``grid``, and per
+    point the assembly, the level's index, the amplitude (m) and each channel's value."""
+
+    mode: int
+    grid: np.ndarray
+    assembly: np.ndarray
+    level: np.ndarray
+    amplitude: np.ndarray
+    values: dict[str, np.ndarray]
+
+    @classmethod
+    def read(
+        cls, measured: BackboneSet, mode: int, owner: np.ndarray, n_levels: int
+    ) -> _ModePoints:
+        """The curves of ``mode`` (their assemblies ``owner``) at ``n_levels`` amplitudes
+        spaced geometrically over the mode's measured range."""
+        low = min(b.amplitude_range_m[0] for b in measured)
+        high = max(b.amplitude_range_m[1] for b in measured)
+        grid = np.geomspace(low, high, n_levels)
+        curve, amplitude, values = curve_points(measured, grid)
+        level = np.clip(np.searchsorted(grid, amplitude), 0, grid.size - 1)
+        return cls(mode, grid, owner[curve], level, amplitude, values)
+
+
 def modal_hierarchical_model(
     model: ModalModel,
     measured: Mapping[int, BackboneSet],
@@ -275,18 +301,11 @@ def modal_hierarchical_model(
     template = template_values(model)
     check_varying(template, names, channels)
     assemblies, owner = assembly_labels(measured)
-    parts = []
-    for g, m in enumerate(modes):
-        low = min(b.amplitude_range_m[0] for b in measured[m])
-        high = max(b.amplitude_range_m[1] for b in measured[m])
-        grid = np.geomspace(low, high, n_levels)
-        curve, amplitude, values = curve_points(measured[m], grid)
-        level = np.clip(np.searchsorted(grid, amplitude), 0, grid.size - 1)
-        parts.append((m, g, grid, owner[m][curve], level, amplitude, values))
-    assembly = np.concatenate([p[3] for p in parts])
-    group = np.concatenate([np.full(p[5].size, p[1]) for p in parts])
-    amplitude = np.concatenate([p[5] for p in parts])
-    values = {c: np.concatenate([p[6][c] for p in parts]) for c in channels}
+    parts = [_ModePoints.read(measured[m], m, owner[m], n_levels) for m in modes]
+    assembly = np.concatenate([p.assembly for p in parts])
+    group = np.concatenate([np.full(p.amplitude.size, g) for g, p in enumerate(parts)])
+    amplitude = np.concatenate([p.amplitude for p in parts])
+    values = {c: np.concatenate([p.values[c] for p in parts]) for c in channels}
     theta0 = np.array([template[n] for n in names])
     centred = np.broadcast_to(np.asarray(centred, dtype=bool), (len(names),))
     # Relative to each mode's own geometric-mean amplitude: the slope of a mode's noise.
@@ -298,12 +317,12 @@ def modal_hierarchical_model(
     with pm.Model(coords=coords) as pm_model:
         theta = population_theta(theta0, names, location_scale, population_scale, centred)
         predicted = {c: [] for c in channels}
-        for m, _, grid, curve, level, _, _ in parts:
+        for part in parts:
             # Every assembly on the mode's levels, then each point picked from its own.
-            tensors = modal_backbone_graph(model, theta, names, grid, mode=m)
+            tensors = modal_backbone_graph(model, theta, names, part.grid, mode=part.mode)
             for c in channels:
                 column = tensors.backbone[..., BACKBONE_COLUMNS.index(c)]
-                predicted[c].append(column[curve, level])
+                predicted[c].append(column[part.assembly, part.level])
         pm.Data("amplitude_m", amplitude, dims="point")
         pm.Data("curve_index", assembly, dims="point")
         pm.Data("mode_index", group, dims="point")

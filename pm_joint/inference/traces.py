@@ -39,12 +39,30 @@ from pymc.backends.ndarray import NDArray
 
 from identification.artifacts import atomic_write_text
 
-__all__ = ["TRACE_FORMAT", "DrawWriter", "read_trace", "start_trace", "written_steps"]
+__all__ = [
+    "TRACE_FORMAT",
+    "DrawWriter",
+    "earlier_trace",
+    "read_trace",
+    "start_trace",
+    "written_steps",
+]
 
 #: Name and version of the folder layout (``trace.json``'s ``format``).
 TRACE_FORMAT = "pm-joint draws 1"
 #: Prefix of the sampler statistics among a chain group's variables.
 _STAT = "stat__"
+
+
+def earlier_trace(trace: str | os.PathLike | None, resume: bool) -> bool:
+    """Whether ``trace`` holds an earlier run's draws; a ValueError where it does and
+    ``resume`` is not asked (an earlier run is continued or removed, never overwritten)."""
+    earlier = trace is not None and Path(trace).exists()
+    if earlier and not resume:
+        raise ValueError(
+            f"{trace} holds the draws of an earlier run: resume it, or remove it to start again"
+        )
+    return earlier
 
 
 def start_trace(
