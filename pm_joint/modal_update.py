@@ -28,7 +28,7 @@ from pm_joint.inference.modal import (
 from pm_joint.inference.storage import attach_density, stored_density
 from pm_joint.inference.traces import earlier_trace
 from pm_joint.report_folder import report
-from pm_joint.sampler_defaults import run_settings, sampler_reason
+from pm_joint.sampler_defaults import GRADIENT_SAMPLERS, run_settings, sampler_reason
 
 __all__ = ["DENSITY_ATTR_MODE", "mode_report", "update_modes"]
 
@@ -67,7 +67,8 @@ def update_modes(
     if population == "hierarchical":
         pm_model = modal_hierarchical_model(model, measured, names, channels=channels)
     else:
-        pm_model = build_modal_model(model, measured, names=names, channels=channels)
+        pm_model = build_modal_model(model, measured, names=names, channels=channels,
+                                     native_graph=sampler in GRADIENT_SAMPLERS)  # fmt: skip
     if earlier_run:
         idata = continue_sampling(pm_model, trace, draws=draws, sampler=sampler)
     else:

@@ -73,7 +73,7 @@ near it is, for a caller that wants to cut there.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -84,16 +84,19 @@ from numpy.typing import ArrayLike
 
 from identification.checks import positive_vector
 from identification.effects import get_effect
-from identification.effects.base import pytensor_namespace
+from identification.effects.base import NUMPY, ArrayNamespace, pytensor_namespace
 from identification.multimode.model import ModalModel
 from pm_joint.forward.base import checked_names
 
 __all__ = [
     "ITERATIONS",
     "SETTLED",
+    "Backend",
     "ModalBackboneTensors",
     "ModalHarmonicGraph",
+    "backbone_equations",
     "modal_backbone_graph",
+    "modal_backbone_numpy",
     "template_values",
 ]
 
@@ -151,6 +154,10 @@ class ModalBackboneTensors(NamedTuple):
 class _Complex:
     re: Any
     im: Any
+
+    # numpy arrays defer to the reflected operators here (as pytensor tensors do), instead
+    # of making an object array of this pair.
+    __array_ufunc__ = None
 
     def __add__(self, other: Any) -> _Complex:
         other = _complex(other)
@@ -252,6 +259,62 @@ def _solve(matrix: list[list[_Complex]], rhs: list[list[_Complex]]) -> list[list
 
 
 # --------------------------------------------------------------------------
+# The array libraries the equations are written for: pytensor (the differentiable graph, its
+# loop a scan) and numpy (values only, its loop a Python one). One source, so the two agree.
+
+
+@dataclass(frozen=True)
+class Backend:
+    """The array functions the backbone's equations (:func:`backbone_equations`) call, for one
+    library: pytensor's, numpy's, or :mod:`pm_joint.forward.modal_op`'s recording one."""
+
+    effects: Callable[[], ArrayNamespace]
+    constant: Callable
+    switch: Callable
+    sqrt: Callable
+    abs: Callable
+    isfinite: Callable
+    arctan2: Callable
+    minimum: Callable
+    neq: Callable
+    zeros_like: Callable
+    stack: Callable
+    broadcast_arrays: Callable
+    #: ``(step, start, θ, n) -> (last, before)``: the states after ``n`` steps and ``n − 1``.
+    iterate: Callable
+
+
+def _scan(step: Callable, start: list, theta: Any, n: int) -> tuple[list, list]:
+    # A scan, not an unrolled loop: the graph (and its compile time) stays one step long.
+    # θ named as a non-sequence: traced implicitly, a PyMC prior's random draw would be copied
+    # into the loop (its RNG with it) instead of its value entering it.
+    steps = pytensor.scan(step, outputs_info=start, non_sequences=[theta], n_steps=n,
+                          return_updates=False)  # fmt: skip
+    return [s[-1] for s in steps], [s[-2] for s in steps]
+
+
+def _loop(step: Callable, start: list, theta: Any, n: int) -> tuple[list, list]:
+    before, last = start, start
+    for _ in range(n):
+        before, last = last, step(*last)
+    return last, before
+
+
+_PYTENSOR = Backend(
+    effects=pytensor_namespace, constant=pt.constant, switch=pt.switch, sqrt=pt.sqrt,
+    abs=pt.abs, isfinite=pt.isfinite, arctan2=pt.arctan2, minimum=pt.minimum, neq=pt.neq,
+    zeros_like=pt.zeros_like, stack=pt.stack, broadcast_arrays=pt.broadcast_arrays,
+    iterate=_scan,
+)  # fmt: skip
+_NUMPY = Backend(
+    effects=lambda: NUMPY, constant=np.asarray, switch=np.where, sqrt=np.sqrt, abs=np.abs,
+    isfinite=np.isfinite, arctan2=np.arctan2, minimum=np.minimum, neq=np.not_equal,
+    zeros_like=np.zeros_like, stack=np.stack, broadcast_arrays=np.broadcast_arrays,
+    iterate=_loop,
+)  # fmt: skip
+
+
+# --------------------------------------------------------------------------
 # The graph.
 
 
@@ -287,6 +350,40 @@ def modal_backbone_graph(
     ModalBackboneTensors
         The backbone in the forward-model layout and every mode's participation.
     """
+    names, amplitudes = _checked(model, names, amplitudes_m, mode, iterations)
+    theta = pt.as_tensor_variable(theta).astype("float64")
+    _check_width(theta.ndim, theta.type.shape[-1] if theta.ndim else None, names)
+    return backbone_equations(_PYTENSOR, model, theta, names, amplitudes, mode, iterations)
+
+
+def modal_backbone_numpy(
+    model: ModalModel,
+    theta: ArrayLike,
+    names: Sequence[str] | None,
+    amplitudes_m: ArrayLike,
+    *,
+    mode: int = 1,
+    iterations: int = ITERATIONS,
+) -> ModalBackboneTensors:
+    """:func:`modal_backbone_graph`'s equations evaluated by numpy: no compile, no gradient.
+
+    The same source as the graph (every operation in the same order, the loop a Python
+    one), for a caller that needs values only (a Metropolis-type sampler, through
+    :class:`~pm_joint.forward.modal_op.ModalHarmonicOp`): the graph's scan compiles for
+    minutes. Arguments and outputs as :func:`modal_backbone_graph`'s, as numpy arrays.
+    """
+    names, amplitudes = _checked(model, names, amplitudes_m, mode, iterations)
+    theta = np.asarray(theta, dtype=np.float64)
+    _check_width(theta.ndim, theta.shape[-1] if theta.ndim else None, names)
+    with np.errstate(all="ignore"):  # invalid rows come out NaN, as in the graph
+        return backbone_equations(_NUMPY, model, theta, names, amplitudes, mode, iterations)
+
+
+def _checked(
+    model: ModalModel, names: Sequence[str] | None, amplitudes_m: ArrayLike, mode: int,
+    iterations: int,
+) -> tuple[tuple[str, ...], np.ndarray]:  # fmt: skip
+    """The parameter names and the amplitude grid, checked with the mode and iterations."""
     names = checked_names(model, names)
     amplitudes = positive_vector(amplitudes_m, "amplitudes_m")
     if isinstance(mode, bool) or not isinstance(mode, int | np.integer):
@@ -295,33 +392,44 @@ def modal_backbone_graph(
         raise ValueError(f"mode must be 1..{model.n_modes} (modes count from 1), got {mode}")
     if not isinstance(iterations, int) or iterations < 2:
         raise ValueError(f"iterations must be an integer ≥ 2, got {iterations!r}")
-    theta = pt.as_tensor_variable(theta).astype("float64")
-    if theta.ndim == 0 or theta.type.shape[-1] not in (None, len(names)):
+    return names, amplitudes
+
+
+def _check_width(ndim: int, width: int | None, names: Sequence[str]) -> None:
+    if ndim == 0 or width not in (None, len(names)):
         raise ValueError(
             f"θ must have a last axis of {len(names)} parameters ({', '.join(names)}), "
-            f"got shape {theta.type.shape}"
+            f"got {ndim} axes, the last of {width}"
         )
-    values = _parameter_tensors(model, theta, names)
-    a = pt.constant(amplitudes)
+
+
+def backbone_equations(
+    xp: Backend, model: ModalModel, theta: Any, names: Sequence[str], amplitudes: np.ndarray,
+    mode: int, iterations: int, *, amplitude: Any = None,
+) -> ModalBackboneTensors:  # fmt: skip
+    """The backbone's equations in the array library ``xp`` (see the module notes), on checked
+    arguments; ``amplitude`` stands for the grid where given (else its constant)."""
+    values = _parameter_tensors(xp, model, theta, names)
+    a = xp.constant(amplitudes) if amplitude is None else amplitude
     n, t = model.n_modes, mode - 1
     others = [m for m in range(n) if m != t]
     # Invalid rows (frequency ≤ 0, damping ratio < 0) compute on the template's
     # values and come out NaN, keeping every intermediate and gradient finite.
     # Every state of the iteration has the full shape (θ's leading axes, the grid).
-    zero = pt.zeros_like(theta[..., :1]) + pt.zeros_like(a)
-    valid = pt.as_tensor_variable(np.array(True))
+    zero = xp.zeros_like(theta[..., :1]) + xp.zeros_like(a)
+    valid = xp.constant(np.array(True))
     w, zeta = [], []
     for m, spec in enumerate(model.modes):
         f, z = values[f"mode{m + 1}.frequency_hz"], values[f"mode{m + 1}.damping_ratio"]
         valid = valid & (f > 0) & (z >= 0)
-        w.append(2.0 * np.pi * pt.switch(f > 0, f, spec.frequency_hz))
-        zeta.append(pt.switch(z >= 0, z, spec.damping_ratio))
+        w.append(2.0 * np.pi * xp.switch(f > 0, f, spec.frequency_hz))
+        zeta.append(xp.switch(z >= 0, z, spec.damping_ratio))
     gamma = [values[f"mode{m + 1}.participation"] for m in range(n)]
     phi = [[values[f"joint{j + 1}.mode{m + 1}"] for m in range(n)] for j in range(model.n_joints)]
     coupling = [values[f"coupling{i + 1}"] for i in range(len(model.couplings))]
     elements = [
         (values[e.label], get_effect(e.effect), e.joint - 1,
-         {k: pt.constant(v) for k, v in e.shape.items()})
+         {k: xp.constant(v) for k, v in e.shape.items()})
         for e in model.elements
     ]  # fmt: skip
 
@@ -331,7 +439,7 @@ def modal_backbone_graph(
 
     def joint_gains(y: list[_Complex], omega: Any) -> list[tuple[_Complex, Any]]:
         """Per joint: ``Σ c (k_eq + iω c_eq)`` without its ω²-part, and that part per ω²."""
-        xp = pytensor_namespace()
+        effects = xp.effects()
         gains = []
         for j in range(model.n_joints):
             q = sum((phi[j][m] * y[m] for m in range(n)), _ZERO)
@@ -339,18 +447,18 @@ def modal_backbone_graph(
             # A joint the motion does not reach is read at a millionth of the locked
             # amplitude: its small-amplitude limit (stuck, for friction, whose gains
             # diverge at 0), keeping the gradient finite.
-            q_abs = pt.sqrt(pt.switch(moving, q.abs2(), (1e-6 * a) ** 2))
+            q_abs = xp.sqrt(xp.switch(moving, q.abs2(), (1e-6 * a) ** 2))
             gain, per_omega_squared = _ZERO, 0.0
             for c, effect, joint, shape in elements:
                 if joint != j:
                     continue
                 if effect.stiffness is not None:
-                    gain = gain + c * effect.stiffness(xp, q_abs, **shape)
+                    gain = gain + c * effect.stiffness(effects, q_abs, **shape)
                 if effect.stiffness_per_omega_squared is not None:
-                    k2 = effect.stiffness_per_omega_squared(xp, q_abs, **shape)
+                    k2 = effect.stiffness_per_omega_squared(effects, q_abs, **shape)
                     per_omega_squared = per_omega_squared + c * k2
                 if effect.damping is not None:
-                    c_eq = effect.damping(xp, q_abs, omega, **shape)
+                    c_eq = effect.damping(effects, q_abs, omega, **shape)
                     gain = gain + _Complex(0.0, omega * c * c_eq)
             gains.append((gain, per_omega_squared))
         return gains
@@ -388,7 +496,7 @@ def modal_backbone_graph(
         y = [_Complex(a, 0.0)] * n
         for i, m in enumerate(others):
             y[m] = _Complex(parts[2 * i], parts[2 * i + 1])
-        omega = pt.sqrt(pt.switch(omega_squared > 0, omega_squared, w[t] ** 2))
+        omega = xp.sqrt(xp.switch(omega_squared > 0, omega_squared, w[t] ** 2))
         gains = joint_gains(y, omega)
         force, _ = driven(y, omega)
 
@@ -416,35 +524,29 @@ def modal_backbone_graph(
         # No A holds the phase (β real) or the ω²-part of the stiffness outweighs the
         # inertia (1 − K₂ ≤ 0, where the one-mode graph has no backbone either): NaN.
         denominator = 1.0 - per_omega_squared
-        solvable = pt.neq(beta.im, 0.0) & (denominator > 0)
-        base = -r.im / pt.switch(solvable, beta.im, 1.0)
-        omega_squared = (r.re + beta.re * base) / (a * pt.switch(solvable, denominator, 1.0))
-        out = [pt.switch(solvable, omega_squared, np.nan), base]
+        solvable = xp.neq(beta.im, 0.0) & (denominator > 0)
+        base = -r.im / xp.switch(solvable, beta.im, 1.0)
+        omega_squared = (r.re + beta.re * base) / (a * xp.switch(solvable, denominator, 1.0))
+        out = [xp.switch(solvable, omega_squared, np.nan), base]
         for u, v in solution:
             y_o = u + v * base
             out += [y_o.re, y_o.im]
         return [zero + x for x in out]
 
-    # A scan, not an unrolled loop: the graph (and its compile time) stays one step long.
     start = [w[t] ** 2 + zero, zero] + [zero] * (2 * len(others))
-    # θ named as a non-sequence: traced implicitly, a PyMC prior's random draw would be copied
-    # into the loop (its RNG with it) instead of its value entering it.
-    steps = pytensor.scan(iteration, outputs_info=start, non_sequences=[theta], n_steps=iterations,
-                          return_updates=False)  # fmt: skip
-    last = [s[-1] for s in steps]
-    before = [s[-2] for s in steps]
+    last, before = xp.iterate(iteration, start, theta, iterations)
     omega_squared, base = last[0], last[1]
     y = [_Complex(a, 0.0)] * n
     for i, m in enumerate(others):
         y[m] = _Complex(last[2 + 2 * i], last[3 + 2 * i])
     positive = omega_squared > 0
-    omega = pt.sqrt(pt.switch(positive, omega_squared, w[t] ** 2))
-    step = pt.abs(omega_squared - before[0]) / pt.switch(positive, omega_squared, 1.0)
+    omega = xp.sqrt(xp.switch(positive, omega_squared, w[t] ** 2))
+    step = xp.abs(omega_squared - before[0]) / xp.switch(positive, omega_squared, 1.0)
     settled = step <= SETTLED
     for i in range(len(others)):
         re, im = (last[k] - before[k] for k in (2 + 2 * i, 3 + 2 * i))
         settled = settled & (re**2 + im**2 <= (SETTLED * a) ** 2)
-    converged = valid & positive & settled & pt.isfinite(omega_squared)
+    converged = valid & positive & settled & xp.isfinite(omega_squared)
 
     _, harmonics = driven(y, omega)
     frequency_hz = omega / (2.0 * np.pi)
@@ -452,29 +554,29 @@ def modal_backbone_graph(
     motion = [{**harmonics[m], 1: y[m]} for m in range(n)]
     amplitude, phase, energy = [], [], []
     for m in range(n):
-        coefficients = [motion[m].get(h, _ZERO) + pt.zeros_like(a) for h in HARMONICS]
+        coefficients = [motion[m].get(h, _ZERO) + xp.zeros_like(a) for h in HARMONICS]
         mean = coefficients[0].re
-        amplitude.append([mean] + [pt.sqrt(c.abs2()) for c in coefficients[1:]])
-        phase.append([pt.zeros_like(mean)] + [pt.arctan2(c.im, c.re) for c in coefficients[1:]])
+        amplitude.append([mean] + [xp.sqrt(c.abs2()) for c in coefficients[1:]])
+        phase.append([xp.zeros_like(mean)] + [xp.arctan2(c.im, c.re) for c in coefficients[1:]])
         e = 0.5 * w[m] ** 2 * mean**2
         for h, c in zip(HARMONICS[1:], coefficients[1:], strict=True):
             e = e + 0.25 * ((h * omega) ** 2 + w[m] ** 2) * c.abs2()
         energy.append(e)
     total = sum(energy)
-    detuning = pt.as_tensor_variable(np.inf) + zero
+    detuning = xp.constant(np.inf) + zero
     for m in others:
         for h in sorted({1, *harmonics[m]} - {0}):
             d = dynamic(m, h * omega)
-            detuning = pt.minimum(detuning, pt.sqrt(d.abs2()) / (h * omega) ** 2)
-    nan_where_not = lambda x: pt.switch(converged, x, np.nan)  # noqa: E731
+            detuning = xp.minimum(detuning, xp.sqrt(d.abs2()) / (h * omega) ** 2)
+    nan_where_not = lambda x: xp.switch(converged, x, np.nan)  # noqa: E731
     frequency_out, damping_out = nan_where_not(frequency_hz), nan_where_not(damping_ratio)
     return ModalBackboneTensors(
-        backbone=pt.stack(pt.broadcast_arrays(a, frequency_out, damping_out), axis=-1),
+        backbone=xp.stack(xp.broadcast_arrays(a, frequency_out, damping_out), axis=-1),
         frequency_hz=frequency_hz,
         damping_ratio=damping_ratio,
-        harmonic_amplitude_m=_stack_modes(amplitude),
-        harmonic_phase_rad=_stack_modes(phase),
-        energy_share=pt.stack(pt.broadcast_arrays(*(e / total for e in energy)), axis=-1),
+        harmonic_amplitude_m=_stack_modes(xp, amplitude),
+        harmonic_phase_rad=_stack_modes(xp, phase),
+        energy_share=xp.stack(xp.broadcast_arrays(*(e / total for e in energy)), axis=-1),
         converged=converged,
         detuning=detuning,
     )
@@ -485,10 +587,10 @@ def _factors(powers: Sequence[int]) -> list[int]:
     return [k for k, p in enumerate(powers) for _ in range(p)]
 
 
-def _stack_modes(per_mode: list[list[Any]]) -> pt.TensorVariable:
+def _stack_modes(xp: Backend, per_mode: list[list[Any]]) -> Any:
     """``(..., A, N, len(HARMONICS))`` from one list of per-harmonic tensors per mode."""
-    rows = [pt.stack(pt.broadcast_arrays(*row), axis=-1) for row in per_mode]
-    return pt.stack(pt.broadcast_arrays(*rows), axis=-2)
+    rows = [xp.stack(xp.broadcast_arrays(*row), axis=-1) for row in per_mode]
+    return xp.stack(xp.broadcast_arrays(*rows), axis=-2)
 
 
 def template_values(model: ModalModel) -> dict[str, float]:
@@ -509,12 +611,12 @@ def template_values(model: ModalModel) -> dict[str, float]:
 
 
 def _parameter_tensors(
-    model: ModalModel, theta: pt.TensorVariable, names: Sequence[str]
+    xp: Backend, model: ModalModel, theta: Any, names: Sequence[str]
 ) -> dict[str, Any]:
     """Every parameter of ``model``: θ's column (with a trailing grid axis) or the template's."""
     template = template_values(model)
     return {
-        name: theta[..., list(names).index(name), None] if name in names else pt.constant(value)
+        name: theta[..., list(names).index(name), None] if name in names else xp.constant(value)
         for name, value in template.items()
     }
 

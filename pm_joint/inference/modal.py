@@ -46,7 +46,8 @@ from identification.measurements.backbone import BackboneSet
 from identification.multimode.model import ModalModel
 from pm_joint.distributions import BackboneAmplitude, BackboneDensity, amplitude_levels
 from pm_joint.forward import BACKBONE_COLUMNS, forward_model, modal_backbone_graph
-from pm_joint.forward.modal_harmonic import template_values
+from pm_joint.forward.modal_harmonic import ModalHarmonicGraph, template_values
+from pm_joint.forward.modal_op import ModalHarmonicOp, Unrecordable
 from pm_joint.inference.models import (
     HIERARCHICAL,
     POPULATION_MATCHING,
@@ -164,6 +165,7 @@ def build_modal_model(
     family: str = "copula",
     densities: Mapping[int, BackboneDensity] | None = None,
     n_grid: int = 41,
+    native_graph: bool = False,
 ) -> pm.Model:
     """Population matching of an N-mode model, one backbone-amplitude potential per mode.
 
@@ -185,6 +187,12 @@ def build_modal_model(
         Each mode's fitted density (then its levels, channels and family are used).
     n_grid
         Amplitude points of each mode's graph (the levels are added to them).
+    native_graph
+        Each mode's backbone as the differentiable graph
+        (:class:`~pm_joint.forward.modal_harmonic.ModalHarmonicGraph`, for a gradient
+        sampler); else as :class:`~pm_joint.forward.modal_op.ModalHarmonicOp`, the same
+        values without a gradient, compiled in seconds instead of the graph's minutes (the
+        graph still where the model has an element the Op cannot record).
 
     Returns
     -------
@@ -209,7 +217,7 @@ def build_modal_model(
             )
         low, high = measured[m].common_range()
         grid = np.union1d(np.linspace(0.5 * low, 1.2 * high, n_grid), densities[m].amplitudes_m)
-        ops[m] = forward_model(MODAL_FORWARD, model, names, amplitudes_m=grid, mode=m)
+        ops[m] = _mode_forward(model, names, grid, m, native_graph)
     # No evaluation at the centre of the box before sampling, as build_model makes: the
     # graph's loop compiles for minutes, and a prediction that misses the levels there is
     # a -inf at PyMC's first evaluation of the starting point (the centre), which says so.
@@ -224,6 +232,18 @@ def build_modal_model(
     pm_model.population_model = POPULATION_MATCHING
     pm_model.modal_model = model
     return pm_model
+
+
+def _mode_forward(
+    model: ModalModel, names: Sequence[str], grid: np.ndarray, mode: int, native_graph: bool
+) -> ModalHarmonicOp | ModalHarmonicGraph:
+    """Mode ``mode``'s backbone on ``grid``: the Op unless the graph is asked for or needed."""
+    if not native_graph:
+        try:
+            return ModalHarmonicOp(model, names, grid, mode)
+        except Unrecordable:
+            pass  # an element with a special function: the graph, compiled as it is
+    return forward_model(MODAL_FORWARD, model, names, amplitudes_m=grid, mode=mode)
 
 
 def assembly_labels(measured: Mapping[int, BackboneSet]) -> tuple[list[str], dict[int, np.ndarray]]:
