@@ -24,6 +24,7 @@ from pm_joint.inference.modal import (
     MODAL_FORWARD,
     build_modal_model,
     modal_hierarchical_model,
+    posterior_mode,
 )
 from pm_joint.inference.storage import attach_density, stored_density
 from pm_joint.inference.traces import earlier_trace
@@ -72,9 +73,11 @@ def update_modes(
     if earlier_run:
         idata = continue_sampling(pm_model, trace, draws=draws, sampler=sampler)
     else:
+        # Population matching's chains start at the posterior's mode (posterior_mode).
+        start = posterior_mode(pm_model) if population != "hierarchical" else None
         idata = sample(
             pm_model, sampler=sampler, draws=draws, tune=tune, chains=chains, random_seed=seed,
-            trace=trace, progressbar=progressbar,
+            trace=trace, progressbar=progressbar, initvals=start,
         )  # fmt: skip
     idata.attrs["convergence"] = json.dumps(convergence_verdict(idata).to_dict())
     idata.attrs["modes"] = json.dumps(sorted(measured))

@@ -104,6 +104,20 @@ def test_the_updated_parameters_and_their_box():
     low, high = bounds["mode2.frequency_hz"]
     assert low < 230.0 < high and high / low < 1.05  # well inside the gap to any 1:2 resonance
     assert bounds["mode1.damping_ratio"][0] < 0.004 < bounds["mode1.damping_ratio"][1]
+    # A damping ratio identified 5 times too high: the factor-3 box misses the truth, the box
+    # that takes in the measured damping ratios holds it (and the other bounds are the same).
+    off = dataclasses.replace(
+        model, modes=(dataclasses.replace(model.modes[0], damping_ratio=0.02), model.modes[1])
+    )
+    measured = read_mode_backbones(_population_table())
+    narrow, wide = modal_bounds(off, names), modal_bounds(off, names, measured)
+    assert not narrow["mode1.damping_ratio"][0] < 0.004
+    assert wide["mode1.damping_ratio"][0] < 0.004 < wide["mode1.damping_ratio"][1]
+    lowest = min(b.damping_ratio.min() for b in measured[1])
+    assert wide["mode1.damping_ratio"][0] == pytest.approx(lowest)
+    assert {k: v for k, v in wide.items() if k != "mode1.damping_ratio"} == {
+        k: v for k, v in narrow.items() if k != "mode1.damping_ratio"
+    }
 
 
 # Slow: the N-mode graph's scan compiles for minutes on a cold cache (CI's).

@@ -3,9 +3,12 @@
 The one-mode models of :mod:`pm_joint.inference.models`, mode by mode: each mode's
 measured backbones (its frequency and damping ratio against its amplitude, the
 ``--modes N`` tables of ``pm-joint backbones``) are scored against that mode's
-phase-resonant backbone from the N-mode graph held at it
-(:class:`~pm_joint.forward.modal_harmonic.ModalHarmonicGraph`, ``mode=m``), every
-mode's graph on the same parameter vector θ.
+phase-resonant backbone from the N-mode equations held at it
+(:mod:`pm_joint.forward.modal_harmonic`, ``mode=m``), every mode's on the same
+parameter vector θ: as the differentiable graph for the hierarchical model and gradient
+samplers (:class:`~pm_joint.forward.modal_harmonic.ModalHarmonicGraph`), as the recorded
+program that compiles in seconds for population matching's Metropolis-type samplers
+(:class:`~pm_joint.forward.modal_op.ModalHarmonicOp`, the same values).
 
 :func:`build_modal_model`
     Population matching: uniform priors on θ and, per mode m, the
@@ -64,6 +67,7 @@ __all__ = [
     "modal_bounds",
     "modal_hierarchical_model",
     "modal_update_names",
+    "posterior_mode",
     "read_mode_backbones",
 ]
 
@@ -81,6 +85,7 @@ ELEMENT_SPREAD = 0.5
 #: Default number of amplitude levels per mode of the hierarchical model.
 HIERARCHICAL_LEVELS = 12
 _MODE_LABEL = re.compile(r"^(?P<assembly>.*) mode (?P<mode>\d+)$")
+_DAMPING_NAME = re.compile(r"^mode(?P<mode>\d+)\.damping_ratio$")
 
 
 def read_mode_backbones(source: str | Path | pd.DataFrame) -> dict[int, BackboneSet]:
@@ -123,10 +128,19 @@ def modal_update_names(model: ModalModel) -> list[str]:
     return names + [e.label for e in model.elements]
 
 
-def modal_bounds(model: ModalModel, names: Sequence[str]) -> dict[str, tuple[float, float]]:
+def modal_bounds(
+    model: ModalModel, names: Sequence[str], measured: Mapping[int, BackboneSet] | None = None
+) -> dict[str, tuple[float, float]]:
     """The default uniform prior box: frequencies ±:data:`FREQUENCY_SPREAD`, damping ratios
-    within a factor :data:`DAMPING_FACTOR`, other parameters ±:data:`ELEMENT_SPREAD`."""
+    within a factor :data:`DAMPING_FACTOR`, other parameters ±:data:`ELEMENT_SPREAD`.
+
+    With ``measured`` (each mode's backbones) a mode's damping-ratio box also takes in the
+    damping ratios measured on that mode: an identification can give part of a mode's
+    decay to other terms (couplings, joint elements) and its linear damping ratio be off by
+    more than the factor, which the backbones, read at small amplitude, show.
+    """
     template = template_values(model)
+    measured = measured or {}
     bounds = {}
     for name in names:
         if name not in template:
@@ -141,6 +155,12 @@ def modal_bounds(model: ModalModel, names: Sequence[str]) -> dict[str, tuple[flo
         if value == 0:
             raise ValueError(f"parameter {name!r} is 0 in the template: give its bounds")
         low, high = sorted(value * s for s in spread)
+        mode = _DAMPING_NAME.match(name)
+        if mode and int(mode["mode"]) in measured:
+            ratios = np.concatenate([b.damping_ratio for b in measured[int(mode["mode"])]])
+            ratios = ratios[np.isfinite(ratios) & (ratios > 0)]
+            if ratios.size:
+                low, high = min(low, float(ratios.min())), max(high, float(ratios.max()))
         bounds[name] = (float(low), float(high))
     return bounds
 
@@ -178,7 +198,7 @@ def build_modal_model(
     names
         Parameters to update (default :func:`modal_update_names`).
     bounds
-        Uniform prior bounds (default :func:`modal_bounds`).
+        Uniform prior bounds (default :func:`modal_bounds` with the measured backbones).
     channels, family
         Of each mode's density (:meth:`BackboneDensity.fit
         <pm_joint.distributions.BackboneDensity.fit>`). Both channels by default: the
@@ -203,7 +223,7 @@ def build_modal_model(
     """
     modes = _checked_modes(model, measured)
     names = list(names or modal_update_names(model))
-    bounds = dict(bounds or modal_bounds(model, names))
+    bounds = dict(bounds or modal_bounds(model, names, measured))
     missing = [n for n in names if n not in bounds]
     if missing:
         raise ValueError(f"no prior bounds for {missing}")
@@ -216,8 +236,11 @@ def build_modal_model(
                 measured[m], amplitude_levels(measured[m]), channels=channels, family=family
             )
         low, high = measured[m].common_range()
-        grid = np.union1d(np.linspace(0.5 * low, 1.2 * high, n_grid), densities[m].amplitudes_m)
-        ops[m] = _mode_forward(model, names, grid, m, native_graph)
+        levels = densities[m].amplitudes_m
+        grid = np.union1d(np.linspace(0.5 * low, 1.2 * high, n_grid), levels)
+        # The Op on the levels and the grid's first point (the interpolation gives NaN at its
+        # first node): the potential reads the levels only, each point's value its own.
+        ops[m] = _mode_forward(model, names, grid, [grid[0], *levels], m, native_graph)
     # No evaluation at the centre of the box before sampling, as build_model makes: the
     # graph's loop compiles for minutes, and a prediction that misses the levels there is
     # a -inf at PyMC's first evaluation of the starting point (the centre), which says so.
@@ -235,15 +258,40 @@ def build_modal_model(
 
 
 def _mode_forward(
-    model: ModalModel, names: Sequence[str], grid: np.ndarray, mode: int, native_graph: bool
+    model: ModalModel,
+    names: Sequence[str],
+    grid: np.ndarray,
+    points: Sequence[float],
+    mode: int,
+    native_graph: bool,
 ) -> ModalHarmonicOp | ModalHarmonicGraph:
-    """Mode ``mode``'s backbone on ``grid``: the Op unless the graph is asked for or needed."""
+    """Mode ``mode``'s backbone: the Op on ``points`` unless the graph is asked for or needed;
+    the graph on ``grid``."""
     if not native_graph:
         try:
-            return ModalHarmonicOp(model, names, grid, mode)
+            return ModalHarmonicOp(model, names, points, mode)
         except Unrecordable:
             pass  # an element with a special function: the graph, compiled as it is
     return forward_model(MODAL_FORWARD, model, names, amplitudes_m=grid, mode=mode)
+
+
+def posterior_mode(pm_model: pm.Model) -> dict[str, np.ndarray] | None:
+    """Where population matching's chains start: the posterior's mode, by Powell's method (no
+    gradient) from the template's values; None where the template scores −inf.
+
+    The population-matching posterior of an N-mode model is narrow against its prior box
+    (each mode's density is fitted to few curves) and cut by the points where the N-mode
+    graph does not settle (−inf): a chain started at the box's centre may walk to it for
+    longer than its tuning. From its mode, the chains' agreement (r̂) judges the mixing.
+    """
+    template = template_values(pm_model.modal_model)
+    start = {rv.name: np.asarray(template[rv.name]) for rv in pm_model.free_RVs}
+    try:
+        with pm_model:
+            found = pm.find_MAP(start=start, method="Powell", progressbar=False)
+    except pm.exceptions.SamplingError:
+        return None
+    return {rv.name: np.asarray(found[rv.name]) for rv in pm_model.free_RVs}
 
 
 def assembly_labels(measured: Mapping[int, BackboneSet]) -> tuple[list[str], dict[int, np.ndarray]]:
