@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pytensor
 import pytensor.tensor as pt
-from demo_speed import _TreeClock  # noqa: E402  bench/demo_speed.py, beside this script
+from demo_speed import _TreeClock  # bench/demo_speed.py, beside this script
 
 from identification.multimode.model import ModalModel
 from pm_joint import demo
