@@ -101,11 +101,14 @@ def test_matches_the_multi_harmonic_balance_within_the_truncation_error(two_mode
     np.testing.assert_allclose(harmonics[-1, 1, 2], np.hypot(c[3], c[4]), rtol=0.05)
 
 
-def test_one_mode_is_the_one_mode_graph_alone_and_beside_an_uncoupled_mode():
+def one_mode_cases(seed: int, n_sets: int) -> tuple:
+    """pandey2025 as a JointModel and as N-mode models, alone and beside an uncoupled mode,
+    with ``n_sets`` parameter sets ±10 % of each's: ``(joint, names, sets, (alone, beside),
+    modal_names, modal_sets)``."""
     joint = JointModel.preset("pandey2025")
     names = joint.parameter_names
     nominal = np.array([joint.parameters[n] for n in names])
-    sets = nominal * np.random.default_rng(0).uniform(0.9, 1.1, (50, nominal.size))
+    sets = nominal * np.random.default_rng(seed).uniform(0.9, 1.1, (n_sets, nominal.size))
     k, c = sets[:, names.index(LINEAR_STIFFNESS)], sets[:, names.index(VISCOUS_DAMPING)]
     others = [n for n in names if n not in (LINEAR_STIFFNESS, VISCOUS_DAMPING)]
     modal_sets = np.column_stack(
@@ -119,6 +122,11 @@ def test_one_mode_is_the_one_mode_graph_alone_and_beside_an_uncoupled_mode():
         joint_shapes=((1.0, 0.0),),
         elements=alone.elements,
     )
+    return joint, names, sets, (alone, beside), modal_names, modal_sets
+
+
+def test_one_mode_is_the_one_mode_graph_alone_and_beside_an_uncoupled_mode():
+    joint, names, sets, (alone, beside), modal_names, modal_sets = one_mode_cases(0, 50)
     a = np.geomspace(1e-5, 2e-3, 21)
     theta_joint, theta_modal = pt.dmatrix(), pt.dmatrix()
     evaluate = pytensor.function(

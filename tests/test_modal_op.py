@@ -15,10 +15,9 @@ import numpy as np
 import pytensor
 import pytensor.tensor as pt
 import pytest
-from test_modal_graph import AMPLITUDES, NAMES, NOMINAL, two_mode
+from test_modal_graph import AMPLITUDES, NAMES, NOMINAL, one_mode_cases, two_mode
 
-from identification.effects import CATALOGUE, LINEAR_STIFFNESS, VISCOUS_DAMPING
-from identification.model import JointModel
+from identification.effects import CATALOGUE
 from identification.multimode import JointElement, ModalModel, Mode
 from pm_joint.forward import harmonic_backbone_graph, modal_backbone_graph
 from pm_joint.forward.modal_harmonic import ModalHarmonicGraph, modal_backbone_numpy
@@ -37,27 +36,12 @@ def _same(got: np.ndarray, expected: np.ndarray, rtol: float) -> None:
 
 
 def test_one_mode_is_the_one_mode_graph_alone_and_beside_an_uncoupled_mode():
-    joint = JointModel.preset("pandey2025")
-    names = joint.parameter_names
-    nominal = np.array([joint.parameters[n] for n in names])
-    sets = nominal * np.random.default_rng(3).uniform(0.9, 1.1, (30, nominal.size))
-    k, c = sets[:, names.index(LINEAR_STIFFNESS)], sets[:, names.index(VISCOUS_DAMPING)]
-    others = [n for n in names if n not in (LINEAR_STIFFNESS, VISCOUS_DAMPING)]
-    modal_sets = np.column_stack(
-        [np.sqrt(k) / (2 * np.pi), c / (2 * np.sqrt(k))] + [sets[:, names.index(n)] for n in others]
-    )
-    alone = ModalModel.from_joint_model(joint)
-    modal_names = ["mode1.frequency_hz", "mode1.damping_ratio"] + [f"joint1.{n}" for n in others]
-    beside = ModalModel(
-        modes=(*alone.modes, Mode(3.1 * alone.modes[0].frequency_hz, 0.02, 0.7)),
-        joint_shapes=((1.0, 0.0),),
-        elements=alone.elements,
-    )
+    joint, names, sets, models, modal_names, modal_sets = one_mode_cases(3, 30)
     a = np.geomspace(1e-5, 2e-3, 21)
     theta = pt.dmatrix()
     expected = pytensor.function([theta], harmonic_backbone_graph(joint, theta, names, a))(sets)
     assert np.isfinite(expected[..., 1]).mean() > 0.9
-    for model in (alone, beside):
+    for model in models:
         got = ModalHarmonicOp(model, modal_names, a)._backbones(modal_sets)
         np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15)
         np.testing.assert_array_equal(np.isnan(got), np.isnan(expected))
