@@ -25,6 +25,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import psutil
 
@@ -70,28 +71,47 @@ class _TreeClock:
         self._thread.join()
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", help="keep the demo's folder here (default: a temporary one)")
-    args = parser.parse_args()
+class TimedDemo(NamedTuple):
+    """One timed demo run: its result, whole wall and CPU seconds, and per stage."""
+
+    result: demo.DemoResult
+    wall_s: float
+    cpu_s: float
+    stage_wall_s: dict[str, float]
+    stage_cpu_s: dict[str, float]
+
+
+def timed_demo(out: Path, **options) -> TimedDemo:
+    """:func:`pm_joint.demo.run_demo` into ``out`` (``options`` passed on), timed: the
+    demo's own stage timer, CPU seconds of the process tree beside it."""
     clock = _TreeClock()
     cpu_s: dict[str, float] = {}
     timed = demo._Stages.run
 
-    def run(self, name, function, *a, **k):  # the demo's own stage timer, CPU beside it
+    def run(self, name, function, *a, **k):
         start = clock.seconds()
         result = timed(self, name, function, *a, **k)
         cpu_s[name] = round(clock.seconds() - start, 1)
         return result
 
     demo._Stages.run = run
-    with tempfile.TemporaryDirectory(prefix="pm_joint_bench_demo_") as tmp:
-        out = Path(args.out or tmp)
+    try:
         wall, cpu = time.perf_counter(), clock.seconds()
-        result = demo.run_demo(out)
+        result = demo.run_demo(out, **options)
         wall, cpu = time.perf_counter() - wall, clock.seconds() - cpu
-        wall_s = json.loads((out / "timings.json").read_text())
-    clock.close()
+    finally:
+        demo._Stages.run = timed
+        clock.close()
+    wall_s = json.loads((out / "timings.json").read_text())
+    return TimedDemo(result, wall, cpu, wall_s, cpu_s)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", help="keep the demo's folder here (default: a temporary one)")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory(prefix="pm_joint_bench_demo_") as tmp:
+        result, wall, cpu, wall_s, cpu_s = timed_demo(Path(args.out or tmp))
     load = os.getloadavg()[0]
     print("Main demo (pm-joint demo, full size): wall and CPU seconds per stage")
     for name, seconds in wall_s.items():

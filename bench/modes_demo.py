@@ -31,10 +31,9 @@ from pathlib import Path
 import numpy as np
 import pytensor
 import pytensor.tensor as pt
-from demo_speed import _TreeClock  # bench/demo_speed.py, beside this script
+from demo_speed import timed_demo  # bench/demo_speed.py, beside this script
 
 from identification.multimode.model import ModalModel
-from pm_joint import demo
 from pm_joint.forward.modal_harmonic import modal_backbone_graph, template_values
 from pm_joint.forward.modal_op import ModalHarmonicOp
 from pm_joint.inference.modal import build_modal_model, modal_update_names, read_mode_backbones
@@ -90,27 +89,12 @@ def main() -> None:
     parser.add_argument("--out", help="keep the case's folder here (default: a temporary one)")
     parser.add_argument("--graph", action="store_true", help="also compile and time the graph")
     args = parser.parse_args()
-    clock = _TreeClock()
-    cpu_s: dict[str, float] = {}
-    timed = demo._Stages.run
-
-    def run(self, name, function, *a, **k):  # the demo's own stage timer, CPU beside it
-        start = clock.seconds()
-        result = timed(self, name, function, *a, **k)
-        cpu_s[name] = round(clock.seconds() - start, 1)
-        return result
-
-    demo._Stages.run = run
     with tempfile.TemporaryDirectory(prefix="pm_joint_bench_modes_") as tmp:
         out = Path(args.out or tmp)
-        wall, cpu = time.perf_counter(), clock.seconds()
-        result = demo.run_demo(out, size="full", case="two-modes")
-        wall, cpu = time.perf_counter() - wall, clock.seconds() - cpu
+        result, wall, cpu, wall_s, cpu_s = timed_demo(out, size="full", case="two-modes")
         load = os.getloadavg()[0]
-        wall_s = json.loads((out / "timings.json").read_text())
         falling = json.loads((out / "two_modes.json").read_text())["mean"]
         forward = _forward_figures(out, args.graph)
-    clock.close()
     verdict = result.verdicts["two-mode population matching"]
     print("Two-mode demo case (pm-joint demo --case two-modes, full size): seconds per stage")
     for name, seconds in wall_s.items():
