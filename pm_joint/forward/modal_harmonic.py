@@ -368,9 +368,10 @@ def modal_backbone_numpy(
     """:func:`modal_backbone_graph`'s equations evaluated by numpy: no compile, no gradient.
 
     The same source as the graph (every operation in the same order, the loop a Python
-    one), for a caller that needs values only (a Metropolis-type sampler, through
-    :class:`~pm_joint.forward.modal_op.ModalHarmonicOp`): the graph's scan compiles for
-    minutes. Arguments and outputs as :func:`modal_backbone_graph`'s, as numpy arrays.
+    one), for a caller that needs values only and a few evaluations (the graph's scan
+    compiles for minutes; a sampler's many calls go to
+    :class:`~pm_joint.forward.modal_op.ModalHarmonicOp`, which records the same source
+    once). Arguments and outputs as :func:`modal_backbone_graph`'s, as numpy arrays.
     """
     names, amplitudes = _checked(model, names, amplitudes_m, mode, iterations)
     theta = np.asarray(theta, dtype=np.float64)

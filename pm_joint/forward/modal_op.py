@@ -423,13 +423,15 @@ class ModalHarmonicOp(BackboneOp):
         self._outputs = [number[x] for x in outputs]
         self._theta_slots = np.array([number[x] for x in theta.slots], dtype=np.int64)
         self._amplitude_slot = number[amplitude.slot]
-        self._constants = {number[x]: v for x, v in program.constants.items() if x in number}
+        kept = [(number[x], v) for x, v in program.constants.items() if x in number]
+        self._constant_slots = np.array([k for k, _ in kept], dtype=np.int64)
+        self._constant_values = np.array([v for _, v in kept], dtype=np.float64)[:, None]
         self.n_slots = len(number)
 
     def _backbones(self, flat: np.ndarray) -> np.ndarray:
         n_sets = flat.shape[0]
         slots = np.zeros((self.n_slots, n_sets * self.n_points))
-        slots[list(self._constants)] = np.array(list(self._constants.values()))[:, None]
+        slots[self._constant_slots] = self._constant_values
         slots[self._amplitude_slot] = np.tile(self.amplitudes_m, n_sets)
         slots[self._theta_slots] = np.repeat(flat.T, self.n_points, axis=1)
         for section, repeat in zip(self._sections, self._repeats, strict=True):

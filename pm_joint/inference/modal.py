@@ -85,7 +85,6 @@ ELEMENT_SPREAD = 0.5
 #: Default number of amplitude levels per mode of the hierarchical model.
 HIERARCHICAL_LEVELS = 12
 _MODE_LABEL = re.compile(r"^(?P<assembly>.*) mode (?P<mode>\d+)$")
-_DAMPING_NAME = re.compile(r"^mode(?P<mode>\d+)\.damping_ratio$")
 
 
 def read_mode_backbones(source: str | Path | pd.DataFrame) -> dict[int, BackboneSet]:
@@ -140,7 +139,6 @@ def modal_bounds(
     more than the factor, which the backbones, read at small amplitude, show.
     """
     template = template_values(model)
-    measured = measured or {}
     bounds = {}
     for name in names:
         if name not in template:
@@ -155,13 +153,14 @@ def modal_bounds(
         if value == 0:
             raise ValueError(f"parameter {name!r} is 0 in the template: give its bounds")
         low, high = sorted(value * s for s in spread)
-        mode = _DAMPING_NAME.match(name)
-        if mode and int(mode["mode"]) in measured:
-            ratios = np.concatenate([b.damping_ratio for b in measured[int(mode["mode"])]])
-            ratios = ratios[np.isfinite(ratios) & (ratios > 0)]
-            if ratios.size:
-                low, high = min(low, float(ratios.min())), max(high, float(ratios.max()))
         bounds[name] = (float(low), float(high))
+    for m, backbones in (measured or {}).items():
+        name = f"mode{m}.damping_ratio"
+        ratios = np.concatenate([b.damping_ratio for b in backbones])
+        ratios = ratios[np.isfinite(ratios) & (ratios > 0)]
+        if name in bounds and ratios.size:
+            low, high = bounds[name]
+            bounds[name] = (min(low, float(ratios.min())), max(high, float(ratios.max())))
     return bounds
 
 
@@ -242,8 +241,8 @@ def build_modal_model(
         # first node): the potential reads the levels only, each point's value its own.
         ops[m] = _mode_forward(model, names, grid, [grid[0], *levels], m, native_graph)
     # No evaluation at the centre of the box before sampling, as build_model makes: the
-    # graph's loop compiles for minutes, and a prediction that misses the levels there is
-    # a -inf at PyMC's first evaluation of the starting point (the centre), which says so.
+    # graph's loop (where it is used) compiles for minutes, and a prediction that misses
+    # the levels is a -inf at PyMC's first evaluation of the sampler's start, which says so.
     with pm.Model() as pm_model:
         theta = uniform_priors(bounds)
         for m in modes:
