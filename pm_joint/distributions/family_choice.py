@@ -135,10 +135,8 @@ def choose_family(
 
     Parameters
     ----------
-    samples
-        One-dimensional samples (at least 3, finite, not all equal).
-    candidates
-        scipy.stats family names.
+    samples, candidates
+        As for :func:`~pm_joint.distributions.families.fit_best`.
     prefer_normal
         Apply :func:`chosen_fit` (when ``"norm"`` is a candidate); ``False``: the
         AICc-best candidate, the choice before the rule.
