@@ -122,13 +122,6 @@ def test_the_updated_parameters_and_their_box():
 
 # Slow: the N-mode graph's scan compiles for minutes on a cold cache (CI's).
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="known defect of population matching's density on five curves, not of the N-mode "
-    "model: mode 2's frequency marginals are fitted as gumbel_l (mode above the median), and "
-    "the converged posterior (10 000 draws, r̂ 1.003, seed 1) has its median at 231.31 Hz "
-    "where the population's is 230.28 (docs/updating-modes.md, Known limits)",
-)
 def test_update_with_a_modal_model_covers_the_populations_frequencies(tmp_path):
     csv = tmp_path / "backbones.csv"
     _population_table().to_csv(csv, index=False)

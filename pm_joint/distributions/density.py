@@ -2,8 +2,10 @@
 
 At chosen amplitude levels every measured backbone gives a frequency (and,
 optionally, a damping ratio). Across the measured curves these values form a
-joint distribution: per-level marginals (the best scipy.stats family by AIC)
-joined by a Gaussian copula, or a multivariate normal. :class:`BackboneDensity`
+joint distribution: per-level marginals (the normal, unless another unbounded
+scipy.stats family beats its AICc by a margin calibrated for the number of curves:
+:mod:`~pm_joint.distributions.family_choice`) joined by a Gaussian copula, or a
+multivariate normal. :class:`BackboneDensity`
 is that fitted density (numpy, scipy); the same density as a pytensor graph
 and as a PyMC distribution is in :mod:`pm_joint.distributions.backbone_amplitude`.
 """
@@ -20,7 +22,8 @@ from scipy import stats
 from sklearn.covariance import ledoit_wolf_shrinkage
 
 from identification.measurements.backbone import BackboneSet
-from pm_joint.distributions.families import UNBOUNDED_CANDIDATES, DistributionFit, fit_best
+from pm_joint.distributions.families import UNBOUNDED_CANDIDATES, DistributionFit
+from pm_joint.distributions.family_choice import choose_family
 
 __all__ = ["CHANNELS", "BackboneDensity", "amplitude_levels", "level_marks"]
 
@@ -119,6 +122,7 @@ class BackboneDensity:
         family: str = "copula",
         candidates: tuple[str, ...] = UNBOUNDED_CANDIDATES,
         shrinkage: float | None = None,
+        prefer_normal: bool = True,
     ) -> BackboneDensity:
         """Fit the joint density to measured backbones.
 
@@ -178,7 +182,9 @@ class BackboneDensity:
             weight = _shrinkage(values) if shrinkage is None else shrinkage
             cov = (1 - weight) * cov + weight * np.diag(np.diag(cov))
             return cls(amplitudes_m, channels, values, family, (), cov, values.mean(axis=0))
-        marginals = tuple(fit_best(column, candidates, "aicc")[0] for column in values.T)
+        marginals = tuple(
+            choose_family(column, candidates, prefer_normal=prefer_normal) for column in values.T
+        )
         scores = np.column_stack(
             [_normal_scores(m, column) for m, column in zip(marginals, values.T, strict=True)]
         )
