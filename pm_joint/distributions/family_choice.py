@@ -9,23 +9,28 @@ that density with it.
 The rule (:func:`chosen_fit`): the normal is the default; the AICc-best other candidate
 replaces it only when it beats the normal's AICc by more than a margin Δ(n)
 (:func:`normal_margin_aicc`), set so that on ``n`` samples drawn from a normal a
-non-normal family is chosen for at most :data:`FALSE_CHOICE_RATE` of the marginals.
+non-normal family is chosen for :data:`FALSE_CHOICE_RATE` of the marginals. Up to
+:data:`TWO_PARAMETER_UP_TO` samples only the candidates of two parameters (location and
+scale) compete with the normal: a third parameter, the t's degrees of freedom, cannot be
+told from the normal's tails in so few samples, and on normal samples it only adds false
+choices (``t_decides`` in ``bench/results/family_choice.json``).
 
 Calibration (``bench/family_choice.py``): the gap ``AICc(norm) − min AICc(other)`` of
-every candidate in :data:`~pm_joint.distributions.families.UNBOUNDED_CANDIDATES` does
-not depend on the normal's mean and spread (every candidate is a location-scale family,
-fitted by maximum likelihood), so its distribution under the normal depends on ``n``
-alone. The bench draws standard-normal samples on tuning seeds at n = 4…30, takes the
-gap's 95 % quantile at each, and Δ(n) is a saturating curve fitted to those quantiles
-(:func:`normal_margin_aicc`), which holds its plateau beyond thirty. The false-choice
-rate (normal samples that get another family) and the power (skewed samples
-that get a skewed family of the right side) are then measured, beside plain AICc, on
-held-out seeds: ``bench/results/family_choice.json``.
+the two-parameter candidates does not depend on the normal's mean and spread (each is a
+location-scale family, fitted by maximum likelihood), so its distribution under the
+normal depends on ``n`` alone. The bench draws standard-normal samples on tuning seeds
+at every n = 4…30 and :data:`MARGIN_BY_N` is the gap's ``1 − FALSE_CHOICE_RATE``
+quantile at each (a table, not a curve: a smooth law through the quantiles missed them
+by up to 0.2, a few per cent of false choices). Beyond thirty samples every candidate
+competes with the margin at thirty. The false-choice rate (normal samples that get
+another family) and the power (skewed samples that get a skewed family of the right
+side) are measured, beside plain AICc, on held-out seeds:
+``bench/results/family_choice.json``.
 
-For a subset of the unbounded candidates the same margin keeps the rate at or below
-5 % (the best of fewer alternatives beats the normal less often); for other candidate
-sets (bounded families) it is not calibrated. With three samples or fewer AICc is
-undefined for every family, and the normal is taken.
+For a subset of the candidates the same margin keeps the rate at or below
+:data:`FALSE_CHOICE_RATE` (the best of fewer alternatives beats the normal less often);
+for other candidate sets (bounded families) it is not calibrated. With three samples or
+fewer AICc is undefined for every family, and the normal is taken.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy import stats
 
 from pm_joint.distributions.families import (
     UNBOUNDED_CANDIDATES,
@@ -43,28 +49,33 @@ from pm_joint.distributions.families import (
 
 __all__ = [
     "FALSE_CHOICE_RATE",
-    "MARGIN_PLATEAU",
-    "MARGIN_RISE",
-    "MARGIN_SCALE_N",
+    "MARGIN_BY_N",
+    "TWO_PARAMETER_UP_TO",
     "choose_family",
     "chosen_fit",
+    "competitors",
     "normal_gap_aicc",
     "normal_margin_aicc",
 ]
 
-#: The share of normal samples for which the rule may choose another family.
+#: The share of normal samples for which the rule chooses another family.
 FALSE_CHOICE_RATE = 0.05
 
-#: Δ(n) = MARGIN_PLATEAU − MARGIN_RISE · exp(−n / MARGIN_SCALE_N): least squares through
-#: the gap's ``1 − FALSE_CHOICE_RATE`` quantiles on standard-normal samples at n = 4…30
-#: (tuning seeds, ``bench/family_choice.py --stage tune``; the quantiles are in
-#: ``bench/results/family_choice_tuning.json``).
-MARGIN_PLATEAU = 3.63
-MARGIN_RISE = 5.51
-MARGIN_SCALE_N = 3.82
+#: Up to this many samples only two-parameter candidates compete with the normal.
+TWO_PARAMETER_UP_TO = 30
+
+#: Δ(n) for n = 4, 5, …, :data:`TWO_PARAMETER_UP_TO`: the gap's ``1 − FALSE_CHOICE_RATE``
+#: quantile on standard-normal samples against the two-parameter candidates of
+#: :data:`~pm_joint.distributions.families.UNBOUNDED_CANDIDATES` (tuning seeds,
+#: ``bench/family_choice.py --stage tune``, which prints this table and writes it with the
+#: sample counts to ``bench/results/family_choice_tuning.json``).
+MARGIN_BY_N: tuple[float, ...] = (
+    1.74, 2.137, 2.393, 2.56, 2.768, 2.9, 3.135, 3.309, 3.207, 3.329, 3.441, 3.465, 3.77, 3.714,
+    3.661, 3.639, 3.77, 3.934, 3.943, 3.835, 3.793, 3.786, 3.828, 3.889, 3.888, 3.973, 3.783,
+)  # fmt: skip
 
 
-def normal_margin_aicc(n_samples: float) -> float:
+def normal_margin_aicc(n_samples: int) -> float:
     """Δ(n): how much lower than the normal's another family's AICc must be to replace it.
 
     Parameters
@@ -75,12 +86,33 @@ def normal_margin_aicc(n_samples: float) -> float:
     Returns
     -------
     float
-        ``MARGIN_PLATEAU − MARGIN_RISE · exp(−n / MARGIN_SCALE_N)``; infinite below four
-        samples (AICc is undefined for two parameters there).
+        :data:`MARGIN_BY_N` at ``n``, its last entry beyond :data:`TWO_PARAMETER_UP_TO`;
+        infinite below four samples (AICc is undefined for two parameters there).
     """
     if n_samples < 4:
         return float("inf")
-    return float(MARGIN_PLATEAU - MARGIN_RISE * np.exp(-n_samples / MARGIN_SCALE_N))
+    return float(MARGIN_BY_N[min(int(n_samples), TWO_PARAMETER_UP_TO) - 4])
+
+
+def competitors(candidates: Sequence[str], n_samples: int) -> tuple[str, ...]:
+    """The candidates that compete with the normal on ``n_samples`` samples.
+
+    Parameters
+    ----------
+    candidates
+        scipy.stats family names.
+    n_samples
+        Number of samples.
+
+    Returns
+    -------
+    tuple of str
+        Up to :data:`TWO_PARAMETER_UP_TO` samples the location-scale families alone (no
+        shape parameter); beyond, every candidate.
+    """
+    if n_samples > TWO_PARAMETER_UP_TO:
+        return tuple(candidates)
+    return tuple(c for c in candidates if getattr(stats, c).numargs == 0)
 
 
 def normal_gap_aicc(ranked: Sequence[DistributionFit]) -> float:
@@ -138,18 +170,18 @@ def choose_family(
     samples, candidates
         As for :func:`~pm_joint.distributions.families.fit_best`.
     prefer_normal
-        Apply :func:`chosen_fit` (when ``"norm"`` is a candidate); ``False``: the
-        AICc-best candidate, the choice before the rule.
+        Apply :func:`chosen_fit` among the :func:`competitors` (when ``"norm"`` is a
+        candidate); ``False``: the AICc-best candidate, the choice before the rule.
 
     Returns
     -------
     DistributionFit
         The chosen fit; its ``family`` says which.
     """
-    ranked = fit_best(samples, candidates, "aicc")
     if not prefer_normal or "norm" not in candidates:
-        return ranked[0]
-    return chosen_fit(ranked, int(np.size(samples)))
+        return fit_best(samples, candidates, "aicc")[0]
+    n_samples = int(np.size(samples))
+    return chosen_fit(fit_best(samples, competitors(candidates, n_samples), "aicc"), n_samples)
 
 
 def _normal(ranked: Sequence[DistributionFit]) -> DistributionFit:
