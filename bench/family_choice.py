@@ -60,19 +60,22 @@ POPULATIONS = {
 SKEWED_FAMILY = "gumbel_r"
 
 
-def _gap(task: tuple[str, int, int]) -> float:
-    """The gap on one sample (tuning: no rule yet)."""
+def _ranked(task: tuple[str, int, int]) -> list:
+    """One sample of ``task``'s population, its competitors' fits ranked by AICc."""
     population, n, seed = task
     rng = np.random.default_rng([seed, n, list(POPULATIONS).index(population)])
     x = POPULATIONS[population](rng, n)
-    return normal_gap_aicc(fit_best(x, competitors(UNBOUNDED_CANDIDATES, n), "aicc"))
+    return fit_best(x, competitors(UNBOUNDED_CANDIDATES, n), "aicc")
+
+
+def _gap(task: tuple[str, int, int]) -> float:
+    """The gap on one sample (tuning: no rule read)."""
+    return normal_gap_aicc(_ranked(task))
 
 
 def _one(task: tuple[str, int, int]) -> dict:
     population, n, seed = task
-    rng = np.random.default_rng([seed, n, list(POPULATIONS).index(population)])
-    x = POPULATIONS[population](rng, n)
-    ranked = fit_best(x, competitors(UNBOUNDED_CANDIDATES, n), "aicc")
+    ranked = _ranked(task)
     row = {"population": population, "n": n, "seed": seed, "gap": normal_gap_aicc(ranked),
            "aicc_family": ranked[0].family,
            "rule_family": chosen_fit(ranked, n).family}  # fmt: skip
@@ -109,14 +112,15 @@ def tune(samples: int, workers: int) -> dict:
 
 
 def report(normal: int, beyond: int, skewed: int, workers: int, block: int) -> dict:
-    seeds = list(held_out_seeds(max(normal, beyond, skewed), block=block))
+    seed_range = held_out_seeds(max(normal, beyond, skewed), block=block)
+    seeds = list(seed_range)
     tasks = [("normal", n, s) for n in TABLE_N for s in seeds[:normal]]
     tasks += [("normal", n, s) for n in BEYOND_N for s in seeds[:beyond]]
     tasks += [(p, n, s) for p in list(POPULATIONS)[1:] for n in POWER_N
               for s in seeds[:skewed]]  # fmt: skip
     rows = _run(tasks, workers)
     level = 1 - (1 - FAMILY_LEVEL) / len(TABLE_N)
-    figures: dict = {"stage": "report", "seeds": held_out_seeds(len(seeds), block=block).to_dict(),
+    figures: dict = {"stage": "report", "seeds": seed_range.to_dict(),
                      "margin": {n: family_choice.normal_margin_aicc(n) for n in TABLE_N + BEYOND_N},
                      "false_choice": {}, "power": {p: {} for p in list(POPULATIONS)[1:]},
                      "outcome_rule": f"every n = 4…{TWO_PARAMETER_UP_TO}: the rate's "
