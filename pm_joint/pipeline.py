@@ -21,11 +21,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import pandas as pd
 import xarray as xr
 
 from identification.analytical import harmonic, pll
 from identification.artifacts import atomic_write_text
 from identification.criticism.moves import run_rounds
+from identification.criticism.participation import ModeParticipation, locked_mode
 from identification.fitting.least_squares import default_free
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.columns import ColumnCampaign
@@ -39,6 +41,7 @@ from identification.measurements.decay_modes import (
 from identification.measurements.modal_backbones import (
     ModalBackboneSet,
     extract_modal_backbones,
+    mode_backbones,
     second_mode_warnings,
 )
 from identification.measurements.modal_filter import SECOND_MODE_SHARE
@@ -364,7 +367,10 @@ def criticize_campaign(
     ``measured`` are the campaign's backbones when already extracted (with the
     harmonics they carry); else the campaign's workspace gives them (its
     ``backbones.csv`` when fresh, else one extraction from the records);
-    ``folder`` may be that workspace.
+    ``folder`` may be that workspace. A modal backbone table (``pm-joint backbones
+    --modes N``: a CSV with a ``mode`` column) gives the backbones of the mode its holds
+    are locked on and the next mode's participation, which places a second mode the
+    criticism names (:mod:`identification.criticism.participation`).
     ``posterior`` (a DataTree) gives the predictive bands and the medians the
     model is compared at; from a hierarchical posterior these are the draws of
     the population's median assembly, so the test widens by the uncertainty of
@@ -380,13 +386,37 @@ def criticize_campaign(
 
     if not isinstance(model, JointModel):
         model = JointModel.from_json(model)
-    if measured is None:
+    participation = None
+    table = _modal_table(folder) if measured is None else None
+    if table is not None:
+        where = str(folder.source if isinstance(folder, Workspace) else folder)
+        measured = mode_backbones(table, locked_mode(table, where), source=where)
+        participation = ModeParticipation.from_table(table, where)
+    elif measured is None:
         workspace = folder if isinstance(folder, Workspace) else Workspace(folder)
         measured = workspace.backbones
-    crit = criticize(model, measured, posterior=posterior, executor=executor)
+    crit = criticize(
+        model, measured, posterior=posterior, executor=executor, participation=participation
+    )
     crit = run_rounds(crit, rounds)[-1]
     crit.write(out)
     return crit
+
+
+def _modal_table(folder: str | os.PathLike | Workspace) -> pd.DataFrame | None:
+    """The table of ``folder`` (a workspace of a backbone CSV, or its path) when it is a
+    modal backbone CSV, else None."""
+    if isinstance(folder, Workspace):
+        if folder.is_campaign:
+            return None
+        folder = folder.source
+    if Path(folder).suffix.lower() != ".csv":
+        return None
+    table = pd.read_csv(folder, dtype={"curve": str, "source": str})
+    if "mode" not in table.columns:
+        return None
+    table["source"] = table["source"].fillna("") if "source" in table else ""
+    return table
 
 
 def label_records(

@@ -3,15 +3,18 @@
 Cases (:data:`CASES`): two-mode data — the lab rig's ``lab-second-mode`` (a mode 5 % above
 the first, coupled through the joint: near 1:1), the two-mode rig (``pm-joint rig --preset
 two-mode``) at its 1:2 ratio and at a ratio near 1:1, the independent simulator's two-mode
-system (:func:`independent_campaign`: no library code) at 1:2 and near 1:1 — and one-mode
-data (``lab-pure`` and every lab hidden-effect preset). Each campaign: 3 assemblies, 8
-levels, the start model fitted to the backbones' frequency and damping (a user's first
-fit), criticised with the harmonics (:func:`identification.criticism.criticism.criticize`,
-defaults).
+system (:func:`independent_campaign`: no library code) at 1:2 and near 1:1 — and data whose
+one-mode model lacks nothing: the two-mode rig with its second mode off the joint and
+uncoupled (:data:`UNCOUPLED_CASES`), ``lab-pure`` and every lab hidden-effect preset.
+Each campaign: 3 assemblies, 8 levels, the start model fitted to the backbones' frequency
+and damping (a user's first fit), criticised with the harmonics
+(:func:`identification.criticism.criticism.criticize`, defaults).
 
 **Outcome rule** (fixed before any reported run, ``docs/criticism.md``, "A missing mode"):
-a two-mode row *passes* when the verdict is "explained by a second mode", the two-mode refit
-locates the frequency and it is within :data:`FREQUENCY_TOLERANCE` of the truth's second
+a two-mode row *passes* when the verdict is "explained by a second mode", the frequency is
+located (from block 9 000 000 by the second mode's participation where the campaign carries
+it — the two-mode rig's 15 points, the independent simulator's second coordinate — else by
+the two-mode refit) and it is within :data:`FREQUENCY_TOLERANCE` of the truth's second
 mode (its frequency at rest); a row named at a located frequency outside it is counted apart
 (*wrong*: the statement the rule must not make); a one-mode row *fails* when the verdict is
 "explained by a second mode" (located or not). Acceptance
@@ -22,17 +25,21 @@ Seeds: tuning below :data:`~studies.seeds.HELD_OUT_SEED`, reported counts from i
 
 from __future__ import annotations
 
+import dataclasses
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from identification.criticism.config import Verdict
 from identification.criticism.criticism import criticize
+from identification.criticism.participation import ModeParticipation, ParticipationCurve
+from identification.criticism.second_mode import Participation
 from identification.fitting.fitter import Fitter
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.extraction import extract_backbones
+from identification.measurements.modal_backbones import extract_modal_backbones
 from identification.model import JointModel
 from identification.rig import (
     LAB_HIDDEN_SCENARIOS,
@@ -56,6 +63,7 @@ __all__ = [
     "FREQUENCY_TOLERANCE",
     "ONE_MODE_CASES",
     "TWO_MODE_CASES",
+    "UNCOUPLED_CASES",
     "Count",
     "SecondModeRow",
     "count",
@@ -76,9 +84,17 @@ TWO_MODE_CASES: dict[str, tuple[str, float | None]] = {
     "independent 1:2": (INDEPENDENT, 1.92),
     "independent near 1:1": (INDEPENDENT, 1.07),
 }
+#: Two modes that do not exchange energy: the two-mode rig with its second mode off the
+#: joint and without the coupling (driven by the base, seen at the 15 points): the null of a
+#: mode named from its participation (name → ratio).
+UNCOUPLED_CASES: dict[str, float | None] = {
+    "uncoupled 1:2": None,
+    "uncoupled near 1:1": 1.06,
+}
 #: One-mode cases: the lab's pure null, every hidden catalogue effect, and the one-mode joints
 #: out of the catalogue (a second mode must not be named for physics that is not one).
 ONE_MODE_CASES: tuple[str, ...] = (
+    *UNCOUPLED_CASES,
     "lab-pure",
     *LAB_HIDDEN_SCENARIOS,
     *(s for s in LAB_OUT_OF_CATALOGUE_SCENARIOS if s != "lab-second-mode"),
@@ -112,8 +128,11 @@ class SecondModeRow(Row):
     seconds
         Wall time of the row.
     located, low_hz, high_hz, screen_hz, location
-        Whether the two-mode refit located the frequency, its interval, the linear screen's
-        best frequency (a diagnostic) and why the frequency is not located.
+        Whether the frequency was located, its interval, the linear screen's best frequency
+        (a diagnostic) and why the frequency is not located.
+    located_by, multi_point
+        What located it (``"participation"``, ``"refit"``) and whether the criticism had the
+        second mode's participation (several response points).
     """
 
     case: str
@@ -137,6 +156,8 @@ class SecondModeRow(Row):
     high_hz: float = float("nan")
     screen_hz: float = float("nan")
     location: str = ""
+    located_by: str = ""
+    multi_point: bool = False
 
     @property
     def named(self) -> bool:
@@ -153,16 +174,41 @@ class SecondModeRow(Row):
         )
 
 
-def _two_mode_rig_campaign(ratio: float | None, seed: int) -> tuple[BackboneSet, float]:
-    """A PLL campaign of mode 1 on the two-mode rig and the truth's second frequency."""
-    rig = ModalRig.preset("two-mode", levels=LEVELS, ratio=ratio)
+def _uncoupled_rig(ratio: float | None) -> ModalRig:
+    """The two-mode rig with its second mode off the joint and without the coupling."""
+    preset = MODAL_RIG_PRESETS["two-mode"]
+    model = dataclasses.replace(preset.model(ratio), joint_shapes=((1.0, 0.0),), couplings=(),
+                                name="two modes, uncoupled")  # fmt: skip
+    amplitudes = 1e-3 * np.geomspace(*preset.amplitude_range_mm[0], LEVELS)
+    return ModalRig.for_amplitudes(
+        model, amplitudes, variability=dict(preset.variability), name="two-mode uncoupled",
+        description="the two-mode rig, its second mode off the joint and uncoupled",
+        **preset.lab, test="pll",
+    )  # fmt: skip
+
+
+def _two_mode_rig_campaign(
+    ratio: float | None, seed: int, uncoupled: bool = False
+) -> tuple[BackboneSet, float, Callable[[], ModeParticipation]]:
+    """A PLL campaign of mode 1 on the two-mode rig (``uncoupled``: :func:`_uncoupled_rig`),
+    the truth's second frequency and the second mode's participation read from the
+    records' 15 points (their modes file's shapes; read only where the criticism asks)."""
+    if uncoupled:
+        rig = _uncoupled_rig(ratio)
+    else:
+        rig = ModalRig.preset("two-mode", levels=LEVELS, ratio=ratio)
     records = []
     for a in range(1, ASSEMBLIES + 1):
         drawn, gain = rig.draw(np.random.default_rng([seed, a]))
         name = f"Config{rig.config}_PRT_Assemb{a}"
         records.append(rig.simulate(drawn, gain, np.random.default_rng([seed, a, 1]), name)[0])
-    truth = float(small_amplitude_frequencies_hz(MODAL_RIG_PRESETS["two-mode"].model(ratio))[1])
-    return extract_backbones(records), truth
+    truth = float(small_amplitude_frequencies_hz(rig.model)[1])
+
+    def participation() -> ModeParticipation:
+        table = extract_modal_backbones(records, 2).to_table()
+        return ModeParticipation.from_table(table, "the records' modal filter")
+
+    return extract_backbones(records), truth, participation
 
 
 #: The independent simulator's two-mode system (:class:`independent.decays.ModalSystem`): its
@@ -196,14 +242,16 @@ def _independent_system(ratio: float, rng: np.random.Generator) -> ModalSystem:
     )  # fmt: skip
 
 
-def independent_campaign(ratio: float, seed: int) -> tuple[BackboneSet, float]:
+def independent_campaign(ratio: float, seed: int) -> tuple[BackboneSet, float, ModeParticipation]:
     """A PLL campaign of mode 1 of the independent two-mode system (its own harmonic
     balance, :func:`independent.modal_resonance.modal_phase_resonance`; hold-fit noise of
-    :class:`independent.campaigns.HoldNoise`) and the truth's second frequency at rest
-    (the nominal system's mode 2: its linear part; the joint's terms are cubic)."""
+    :class:`independent.campaigns.HoldNoise`), the truth's second frequency at rest
+    (the nominal system's mode 2: its linear part; the joint's terms are cubic) and mode 2's
+    participation (its coordinate's harmonics 1–2, with the harmonics' noise in m: a modal
+    filter's reading)."""
     noise, scatter = HoldNoise(), PopulationScatter()
     nominal = 1e-3 * np.geomspace(0.05, 2.0, LEVELS)
-    curves = []
+    curves, parts = [], []
     for a in range(1, ASSEMBLIES + 1):
         rng = np.random.default_rng([seed, a])
         system = _independent_system(ratio, rng)
@@ -224,7 +272,16 @@ def independent_campaign(ratio: float, seed: int) -> tuple[BackboneSet, float]:
             harmonic_standard_error=np.repeat(h_noise[:, None], 2, axis=1),
             time_s=HOLD_S * (np.arange(LEVELS) + 0.5),
         ))  # fmt: skip
-    return BackboneSet(curves), ratio * _INDEPENDENT_F1_HZ
+        extra = rng.standard_normal((4, LEVELS))
+        second = (
+            held.participation[:, 1, :2]
+            + (h_noise * levels)[:, None] * (extra[:2] + 1j * extra[2:]).T
+        )
+        last = curves[-1]
+        parts.append(ParticipationCurve(levels, last.frequency_hz, last.damping_ratio, second,
+                                        last.label))  # fmt: skip
+    participation = ModeParticipation(tuple(parts), 2, "independent.modal_resonance")
+    return BackboneSet(curves), ratio * _INDEPENDENT_F1_HZ, participation
 
 
 def _start(model: JointModel, measured: BackboneSet) -> JointModel:
@@ -232,34 +289,43 @@ def _start(model: JointModel, measured: BackboneSet) -> JointModel:
     return Fitter.from_backbones(measured.without_harmonics()).fit(model).model
 
 
-def campaign(case: str, seed: int) -> tuple[BackboneSet, JointModel, float]:
+def campaign(case: str, seed: int) -> tuple[BackboneSet, JointModel, float, Participation]:
     """The campaign of ``case`` at ``seed``: backbones, the one-mode start model fitted to
-    them, the truth's second-mode frequency (NaN for one-mode data)."""
+    them, the truth's second-mode frequency (NaN for one-mode data) and the second mode's
+    participation where the campaign has several response points (None: one)."""
     if case in TWO_MODE_CASES:
         rig, ratio = TWO_MODE_CASES[case]
         if rig == "two-mode":
-            measured, truth = _two_mode_rig_campaign(ratio, seed)
-            return measured, _start(RIG_PRESETS[_TWO_MODE_START].model, measured), truth
+            measured, truth, part = _two_mode_rig_campaign(ratio, seed)
+            return measured, _start(RIG_PRESETS[_TWO_MODE_START].model, measured), truth, part
         if rig == INDEPENDENT:
-            measured, truth = independent_campaign(ratio, seed)
-            return measured, _start(RIG_PRESETS[_INDEPENDENT_START].base_model, measured), truth
+            measured, truth, part = independent_campaign(ratio, seed)
+            start = _start(RIG_PRESETS[_INDEPENDENT_START].base_model, measured)
+            return measured, start, truth, part
         preset = RIG_PRESETS[rig]
         mode = preset.lab["second_mode"]
         truth = mode.frequency_ratio * preset.model.linear_frequency_hz
+    elif case in UNCOUPLED_CASES:
+        measured, _, part = _two_mode_rig_campaign(UNCOUPLED_CASES[case], seed, uncoupled=True)
+        return measured, _start(RIG_PRESETS[_TWO_MODE_START].model, measured), float("nan"), part
     elif case in ONE_MODE_CASES:
         preset, truth = RIG_PRESETS[case], float("nan")
         rig = case
     else:
         raise ValueError(f"unknown case {case!r}; cases: {', '.join(CASES)}")
     _, measured = rig_campaign(rig, ASSEMBLIES, (seed,), levels=LEVELS)
-    return measured, _start(preset.base_model, measured), float(truth)
+    return measured, _start(preset.base_model, measured), float(truth), None
 
 
-def second_mode_campaign(case: str, seed: int, **options) -> SecondModeRow:
-    """Criticise one campaign of ``case`` (``options`` to ``criticize``) and judge it."""
+def second_mode_campaign(
+    case: str, seed: int, *, multi_point: bool = True, **options
+) -> SecondModeRow:
+    """Criticise one campaign of ``case`` (``options`` to ``criticize``) and judge it;
+    ``multi_point=False`` withholds the second mode's participation (one response point)."""
     began = time.perf_counter()
-    measured, model, truth = campaign(case, seed)
-    crit = criticize(model, measured, **options)
+    measured, model, truth, participation = campaign(case, seed)
+    participation = participation if multi_point else None
+    crit = criticize(model, measured, participation=participation, **options)
     mode = crit.second_mode
     named = crit.verdict == Verdict.SECOND_MODE
     two = case in TWO_MODE_CASES
@@ -272,6 +338,7 @@ def second_mode_campaign(case: str, seed: int, **options) -> SecondModeRow:
         passed=(named and mode.located and close) if two else not named,
         seconds=time.perf_counter() - began, located=mode.located, low_hz=mode.interval_hz[0],
         high_hz=mode.interval_hz[1], screen_hz=mode.screen_frequency_hz, location=mode.location,
+        located_by=mode.located_by, multi_point=participation is not None,
     )  # fmt: skip
 
 

@@ -69,6 +69,7 @@ PyMC come in through ``pm_joint``'s adapter (this engine imports no PyMC).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from functools import cached_property
 from pathlib import Path
@@ -110,7 +111,7 @@ from identification.criticism.records import (
     Trial,
 )
 from identification.criticism.refits import Refits
-from identification.criticism.second_mode import SecondMode, second_mode
+from identification.criticism.second_mode import Participation, SecondMode, second_mode
 from identification.effects import CATALOGUE, get_effect
 from identification.fitting.data import FitData, fit_data
 from identification.fitting.fitter import Fitter
@@ -228,6 +229,7 @@ class Criticism:
         swaps: Sequence[SwapTrial | Mapping[str, Any]] = (),
         added: Sequence[str] = (),
         removed: Sequence[str] = (),
+        participation: Participation = None,
     ) -> None:
         self.config = CriticismConfig.of(
             config, method=method, weights=weights, criterion=criterion, alpha=alpha,
@@ -236,6 +238,7 @@ class Criticism:
         self.model = model
         self.data = data
         self.posterior = posterior
+        self.participation = participation
         self.candidate_effects = _candidate_list(model, candidates)
         self.previous_rounds = [dict(r) for r in rounds]
         self.swaps = [s if isinstance(s, SwapTrial) else SwapTrial.from_dict(s) for s in swaps]
@@ -340,7 +343,7 @@ class Criticism:
         refits = [
             c.delta_chi2 for c in self.candidates if c.delta_chi2 is not None and not c.problems
         ]
-        return second_mode(self.decision, max(refits, default=-np.inf))
+        return second_mode(self.decision, max(refits, default=-np.inf), self.participation)
 
     @property
     def verdict(self) -> Verdict:
@@ -430,6 +433,7 @@ class Criticism:
             swaps=swaps,
             added=added,
             removed=removed,
+            participation=self.participation,
         )
 
     # ------------------------------------------------------------ words, JSON
@@ -522,6 +526,7 @@ def criticize(
     noise_floor: Mapping[str, float] | None = None,
     n_periods: int = 70,
     executor: Any = None,
+    participation: Participation = None,
 ) -> Criticism:
     """Compare a model with measured backbones, decide whether something is missing, rank
     what the catalogue offers, and say when it does not explain the data.
@@ -600,6 +605,7 @@ def criticize(
         model, data, method=method, weights=weights, candidates=candidates, criterion=criterion,
         alpha=alpha, n_bootstrap=n_bootstrap, seed=seed, posterior=draws,
         posterior_kind=posterior_kind, history=steps, executor=executor,
+        participation=functools.cache(participation) if callable(participation) else participation,
     )  # fmt: skip
 
 

@@ -136,6 +136,9 @@ class RefitProfile:
         ``(R, 3)`` the route's values that gave it (:class:`Family`).
     first_frequency_hz
         ``ω₁/2π`` the ratios multiply.
+    method
+        What gave the profile, in the words: ``"refit"`` (this module) or
+        ``"participation"`` (:mod:`~identification.criticism.participation`).
     """
 
     route: str
@@ -143,6 +146,7 @@ class RefitProfile:
     profile: np.ndarray
     values: np.ndarray
     first_frequency_hz: float
+    method: str = "refit"
 
     @property
     def best(self) -> int:
@@ -177,12 +181,12 @@ class RefitProfile:
     def why_not_located(self) -> str:
         """Why the frequency is not located (empty: located; the module notes)."""
         if not np.isfinite(self.gain):
-            return f"the {self.route} route's refit solved at no ratio"
+            return f"the {self.route} route's {self.method} solved at no ratio"
         best, solved = self.best, np.isfinite(self.profile)
         beside = np.arange(best - _EDGE_STEPS, best + _EDGE_STEPS + 1)
         if beside.min() < 0 or beside.max() >= solved.size or not solved[beside].all():
             return (
-                f"the {self.route} route's refit is best beside the end of its grid or the "
+                f"the {self.route} route's {self.method} is best beside the end of its grid or the "
                 "band the backbone would cross: a mode there or beyond it, not where"
             )
         apart = np.abs(self.ratios / self.ratios[best] - 1) > LOCATED_WIDTH / 2
@@ -190,8 +194,9 @@ class RefitProfile:
         if rival.any():
             other = float(self.ratios[np.flatnonzero(rival)[0]] * self.first_frequency_hz)
             return (
-                f"the {self.route} route's refit fits as well {100 * LOCATED_WIDTH / 2:.0f} % "
-                f"and more apart (at {other:.4g} Hz as at {self.frequency_hz:.4g} Hz)"
+                f"the {self.route} route's {self.method} fits as well "
+                f"{100 * LOCATED_WIDTH / 2:.0f} % and more apart "
+                f"(at {other:.4g} Hz as at {self.frequency_hz:.4g} Hz)"
             )
         return ""
 

@@ -98,11 +98,17 @@ located" with why (:attr:`SecondMode.location`) — the data of one sensor may n
 a mode near 1:1 is, and the finding says so rather than a number. The route named is the
 refit's best; the share and where it shows come from the screen's fit (no frequency in
 them where none is located).
+
+**Multi-point records place it directly.** Where the records carry the other mode's own
+coordinate (``backbones --modes 2``), its participation at the holds places the named
+mode (:mod:`~identification.criticism.participation`: its detuning as the backbone moves)
+and the refit is not needed; where it does not locate, the refit answers as above.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from typing import TYPE_CHECKING, Any
@@ -113,6 +119,7 @@ from identification.criticism import calibration as cal
 from identification.criticism.config import LINEAR_PAIR, SEPARATION
 from identification.criticism.directions import Direction, mean_prediction
 from identification.criticism.mode_refit import RefitProfile, refit_profiles
+from identification.criticism.participation import ModeParticipation, locate_by_participation
 from identification.effects import CATALOGUE
 from identification.multimode.solve import energy_shares
 
@@ -476,6 +483,10 @@ class SecondMode:
     screen_frequency_hz
         The linear screen's best column's frequency: a diagnostic, never a finding (near
         1:1 a linearised column may fit best far from the truth).
+    located_by
+        What placed the frequency: ``"participation"`` (the other mode's coordinate in
+        multi-point records, :mod:`~identification.criticism.participation`), ``"refit"``
+        (the two-mode refit of one response point's backbone); empty where not located.
     """
 
     named: bool
@@ -493,6 +504,7 @@ class SecondMode:
     interval_hz: tuple[float, float] = (float("nan"), float("nan"))
     location: str = ""
     screen_frequency_hz: float = float("nan")
+    located_by: str = ""
 
     @property
     def text(self) -> str:
@@ -509,16 +521,32 @@ class SecondMode:
             why = f" ({self.location})" if self.location else ""
             return f"a second mode, frequency not located{why}: it {how}"
         low, high = self.interval_hz
+        by = (
+            " as its participation at the sensors places it"
+            if self.located_by == (PARTICIPATION)
+            else ""
+        )
         return (
             f"a second mode near {self.frequency_hz:.4g} Hz (ratio {self.ratio:.3g} to the "
-            f"first, between {low:.4g} and {high:.4g} Hz) {how}"
+            f"first, between {low:.4g} and {high:.4g} Hz{by}) {how}"
         )
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self) | {"where": list(self.where), "text": self.text}
 
 
-def second_mode(decision: Decision, catalogue_refit_gain: float = -np.inf) -> SecondMode:
+#: Where the records carry the other mode's coordinate: its participation places it.
+PARTICIPATION = "participation"
+#: A participation given, or a function giving it (called only where a mode is named:
+#: reading it from multi-point records costs an extraction).
+type Participation = ModeParticipation | Callable[[], ModeParticipation | None] | None
+
+
+def second_mode(
+    decision: Decision,
+    catalogue_refit_gain: float = -np.inf,
+    participation: Participation = None,
+) -> SecondMode:
     """The second-mode finding at ``decision`` (the rule of the module notes).
 
     Parameters
@@ -527,24 +555,31 @@ def second_mode(decision: Decision, catalogue_refit_gain: float = -np.inf) -> Se
         The calibrated decision of the criticism.
     catalogue_refit_gain
         The best admissible catalogue refit's ``Δχ²`` (``-inf``: none refitted).
+    participation
+        The other mode's participation in the holds (multi-point records), or a function
+        giving it: where it locates the named mode, it places the frequency instead of the
+        two-mode refit (:mod:`~identification.criticism.participation`).
 
     Returns
     -------
     SecondMode
         The finding, named or with why not.
     """
-    return _Search(decision, catalogue_refit_gain).finding
+    return _Search(decision, catalogue_refit_gain, participation).finding
 
 
 class _Search:
     """The rule applied to one decision: observed gains first, the bootstrap only where
     the observed gains leave the answer open."""
 
-    def __init__(self, decision: Decision, catalogue_refit_gain: float) -> None:
+    def __init__(
+        self, decision: Decision, catalogue_refit_gain: float, participation: Participation
+    ) -> None:
         self.decision = decision
         self.modes = mode_columns(decision)
         self.routes = mode_routes(self.modes)
         self.catalogue_refit_gain = catalogue_refit_gain
+        self.participation = participation
 
     @cached_property
     def projected(self) -> np.ndarray:
@@ -635,9 +670,10 @@ class _Search:
             threshold = self.threshold()
             if gain <= threshold:
                 why = f"its gain Δχ² {gain:.4g} is below its calibrated threshold {threshold:.3g}"
-        refit = self.refit() if not why else None
+        refit = self.placed() if not why else None
         location = "" if refit is None else refit.why_not_located
-        if refit is not None and not location and refit.gain < catalogue + SEPARATION:
+        by_refit = refit is not None and refit.method != PARTICIPATION
+        if by_refit and not location and refit.gain < catalogue + SEPARATION:
             location = (
                 f"the two-mode refit's gain Δχ² {refit.gain:.4g} does not exceed the "
                 f"catalogue's best ({catalogue:.4g}) by {SEPARATION:g}"
@@ -660,10 +696,18 @@ class _Search:
             interval_hz=refit.interval_hz if located else (nan, nan),
             location=location,
             screen_frequency_hz=float(modes.ratios[route] * modes.first_frequency_hz),
+            located_by=refit.method if located else "",
         )
 
-    def refit(self) -> RefitProfile:
-        """The two-mode refit's best route (:func:`~.mode_refit.refit_profiles`)."""
+    def placed(self) -> RefitProfile:
+        """The profile that places the named mode: its participation's where the records
+        carry it and it locates the mode, else the two-mode refit's best route
+        (:func:`~.mode_refit.refit_profiles`)."""
+        given = self.participation() if callable(self.participation) else self.participation
+        if given is not None:
+            answer = locate_by_participation(given)
+            if answer.located:
+                return answer.profile
         return max(refit_profiles(self.decision), key=lambda p: p.gain)
 
     def coefficient(self, index: int) -> float:

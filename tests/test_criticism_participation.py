@@ -1,0 +1,104 @@
+"""A second mode placed by its participation at the sensors (multi-point records).
+
+The independent simulator's two-mode system (``independent.modal_resonance``: its own
+harmonic balance, no library code) gives the second mode's coordinate at every hold of the
+first's phase resonance, with hold-fit noise; its frequency is the simulator's own
+parameter. Tuning seed 1 (``studies.seeds``).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from identification.criticism.mode_refit import COUPLING_ROUTE, JOINT_ROUTE
+from identification.criticism.participation import (
+    ModeParticipation,
+    locate_by_participation,
+    locked_mode,
+)
+from identification.measurements.backbone import BackboneSet
+from pm_joint.cli import main
+from studies.second_mode import campaign, independent_campaign, second_mode_campaign
+
+SEED = 1
+
+
+@pytest.mark.parametrize(("ratio", "route"), [(1.92, COUPLING_ROUTE), (1.07, JOINT_ROUTE)])
+def test_the_participation_places_the_independent_simulators_second_mode(ratio, route):
+    """Near 1:2 the second harmonic's resonance, near 1:1 the fundamental's, places the mode
+    within 5 % of the simulator's frequency, and the interval holds the stated frequency."""
+    _, truth, participation = independent_campaign(ratio, SEED)
+    answer = locate_by_participation(participation)
+    assert answer.located, answer.why_not_located
+    profile = answer.profile
+    assert profile.route == route and profile.method == "participation"
+    assert abs(profile.frequency_hz - truth) <= 0.05 * truth, (profile.frequency_hz, truth)
+    low, high = profile.interval_hz
+    assert low <= profile.frequency_hz <= high
+
+
+def test_a_mode_between_the_routes_is_not_located():
+    """A second mode at 1.5 × the first is near neither ω nor 2ω: no resonance of either
+    route shapes its participation, and the answer says why instead of a frequency."""
+    _, _, participation = independent_campaign(1.5, SEED)
+    answer = locate_by_participation(participation)
+    assert not answer.located
+    assert "participation" in answer.why_not_located
+
+
+def _modal_table(measured, participation) -> pd.DataFrame:
+    """The table ``pm-joint backbones --modes 2`` writes, from the simulator's holds: the
+    locked mode's rows and mode 2's rows (its participation only), mode 2's harmonics on
+    both."""
+    frames = []
+    for curve, part in zip(measured, participation.curves, strict=True):
+        rows = BackboneSet([curve]).to_table()
+        rows.insert(1, "mode", 1)
+        rows.insert(2, "hold", np.arange(1, len(rows) + 1))
+        for k in range(part.harmonics_m.shape[1]):
+            rows[f"mode2_h{k + 1}_amplitude_mm"] = 1e3 * np.abs(part.harmonics_m[:, k])
+            rows[f"mode2_h{k + 1}_phase_deg"] = np.degrees(np.angle(part.harmonics_m[:, k]))
+        other = rows.copy()
+        other["mode"] = 2
+        other[["frequency_hz", "damping_ratio"]] = np.nan
+        frames += [rows, other]
+    return pd.concat(frames, ignore_index=True)
+
+
+def test_a_modal_table_gives_the_locked_backbones_and_the_next_modes_participation(tmp_path):
+    """Read back from the table, the participation is the simulator's (mm → m, phases) and
+    places the same frequency; ``pm-joint criticize`` takes the table and criticises the
+    locked mode's backbones."""
+    measured, start, _, participation = campaign("independent near 1:1", SEED)
+    table = _modal_table(measured, participation)
+    assert locked_mode(table) == 1
+    read = ModeParticipation.from_table(table)
+    assert read.mode == 2 and len(read.curves) == len(participation.curves)
+    for got, put in zip(read.curves, participation.curves, strict=True):
+        np.testing.assert_allclose(got.harmonics_m, put.harmonics_m, rtol=1e-9, atol=1e-15)
+        np.testing.assert_allclose(got.amplitude_m, put.amplitude_m, rtol=1e-9)
+    placed = locate_by_participation(read).profile.frequency_hz
+    assert placed == pytest.approx(locate_by_participation(participation).profile.frequency_hz)
+
+    csv = tmp_path / "backbones.csv"
+    table.to_csv(csv, index=False)
+    model = tmp_path / "model.json"
+    start.to_json(model)
+    out = tmp_path / "criticism"
+    assert main(["criticize", str(csv), "--model", str(model), "--out", str(out)]) == 0
+    report = json.loads((out / "criticism.json").read_text())
+    assert report["n_curves"] == len(measured)
+
+
+def test_a_named_mode_is_placed_by_its_participation_on_the_two_mode_rig():
+    """The two-mode rig near 1:1 (15 points; the modal filter of the records' modes file):
+    the one-mode model's criticism names the second mode and its participation places it
+    within 5 % of the rig's second mode at rest."""
+    row = second_mode_campaign("two-mode near 1:1", SEED)
+    assert row.named and row.multi_point, row.why
+    assert row.located and row.located_by == "participation", row.location
+    assert abs(row.named_hz - row.truth_hz) <= 0.05 * row.truth_hz, (row.named_hz, row.truth_hz)
