@@ -12,14 +12,15 @@ and damping (a user's first fit), criticised with the harmonics
 
 **Outcome rule** (fixed before any reported run, ``docs/criticism.md``, "A missing mode"):
 a two-mode row *passes* when the verdict is "explained by a second mode", the frequency is
-located (from block 9 000 000 by the second mode's participation where the campaign carries
+located (from block 12 000 000 by the second mode's participation where the campaign carries
 it — the two-mode rig's 15 points, the independent simulator's second coordinate — else by
-the two-mode refit) and it is within :data:`FREQUENCY_TOLERANCE` of the truth's second
-mode (its frequency at rest); a row named at a located frequency outside it is counted apart
-(*wrong*: the statement the rule must not make); a one-mode row *fails* when the verdict is
-"explained by a second mode" (located or not). Acceptance
-(#27): ≥ 27 of 30 per two-mode case, ≤ 1 of 30 on one-mode data; counts are reported with
-their two-sided 95 % Clopper–Pearson intervals (:func:`studies.binomial.clopper_pearson`).
+the two-mode refit; named by the screen or by the participation) and it is within
+:data:`FREQUENCY_TOLERANCE` of the truth's second mode (its frequency at rest); a row named
+at a located frequency outside it is counted apart (*wrong*: the statement the rule must
+not make); a one-mode row *fails* when the verdict is "explained by a second mode" (located
+or not). Acceptance (#27): ≥ 27 of 30 per two-mode case, ≤ 1 of 30 on one-mode data;
+counts are reported with their two-sided 95 % Clopper–Pearson intervals
+(:func:`studies.binomial.clopper_pearson`).
 Seeds: tuning below :data:`~studies.seeds.HELD_OUT_SEED`, reported counts from it up.
 """
 
@@ -133,6 +134,9 @@ class SecondModeRow(Row):
     located_by, multi_point
         What located it (``"participation"``, ``"refit"``) and whether the criticism had the
         second mode's participation (several response points).
+    named_by, exchange
+        What named it (``"screen"``, ``"participation"``) and the χ² of the coupling's drive
+        of the second mode's coordinate (NaN where not measured).
     """
 
     case: str
@@ -158,6 +162,8 @@ class SecondModeRow(Row):
     location: str = ""
     located_by: str = ""
     multi_point: bool = False
+    named_by: str = ""
+    exchange: float = float("nan")
 
     @property
     def named(self) -> bool:
@@ -339,6 +345,7 @@ def second_mode_campaign(
         seconds=time.perf_counter() - began, located=mode.located, low_hz=mode.interval_hz[0],
         high_hz=mode.interval_hz[1], screen_hz=mode.screen_frequency_hz, location=mode.location,
         located_by=mode.located_by, multi_point=participation is not None,
+        named_by=mode.named_by, exchange=mode.exchange,
     )  # fmt: skip
 
 

@@ -13,6 +13,7 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
+from scipy.stats import chi2
 
 from identification.criticism.mode_refit import COUPLING_ROUTE, JOINT_ROUTE
 from identification.criticism.participation import (
@@ -39,6 +40,29 @@ def test_the_participation_places_the_independent_simulators_second_mode(ratio, 
     assert abs(profile.frequency_hz - truth) <= 0.05 * truth, (profile.frequency_hz, truth)
     low, high = profile.interval_hz
     assert low <= profile.frequency_hz <= high
+
+
+def test_the_coupling_names_the_independent_simulators_mode_at_1_2():
+    """At 1:2 the second harmonic of the simulator's second coordinate grows ∝ a² through
+    its detuning: the coupling's drive takes far more than its threshold off, and the
+    one-mode model's criticism names the mode from it — placed within 5 % — where the
+    one-point screen names none (block 8 000 000: 0 of 16)."""
+    _, truth, participation = independent_campaign(1.92, SEED)
+    answer = locate_by_participation(participation)
+    assert answer.exchanges, (answer.exchange, answer.exchange_threshold)
+    row = second_mode_campaign("independent 1:2", SEED)
+    assert row.named and row.named_by == "participation", row.why
+    assert abs(row.named_hz - truth) <= 0.05 * truth
+
+
+def test_a_mode_the_shaker_drives_at_2w_is_not_named():
+    """The two-mode rig with its second mode off the joint and uncoupled: the shaker's
+    distortion drives it at 2ω, so its second harmonic is located, but the measured
+    excitation's harmonic explains it — the coupling's drive takes less than its threshold
+    off and no second mode is named."""
+    row = second_mode_campaign("uncoupled 1:2", SEED)
+    assert row.multi_point and row.exchange < chi2.ppf(0.99, 6), row.exchange
+    assert not row.named and row.passed, row.verdict
 
 
 def test_a_mode_between_the_routes_is_not_located():

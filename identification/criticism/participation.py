@@ -14,10 +14,13 @@ other mode per unit ``a^k``. At ``k = 1`` a mode near the first is driven by the
 phase-locked control the drive balances the locked mode's damping force, ``∝ iζω²``) and by
 the joint's force beyond rest (its change of the locked mode's stiffness, ``∝ ω² − ω₀²``);
 what the modal filter leaks from the locked mode is a constant: per curve,
-``F₁(a) = c₀ + c₁ (ω² − ω₀²)/ω₀² + c₂ iζω²/ω₀²`` with complex ``c`` (:data:`BASIS`). At
-``k = 2`` a mode near ``2ω`` is driven by a quadratic coupling, ``∝ a²``: ``F₂ = c₀``
-(a drive that followed the backbone's stiffness would mimic the detuning's first-order
-change and hide where the mode is). For a trial ``ω₂ = r ω₁`` the fit is linear: the
+``F₁(a) = c₀ + c₁ (ω² − ω₀²)/ω₀² + c₂ iζω²/ω₀²`` with complex ``c``. At ``k = 2`` a mode
+near ``2ω`` is driven by a quadratic coupling, ``∝ a²`` (``c₀ a²``; a drive that followed
+the backbone's stiffness would mimic the detuning's first-order change and hide where the
+mode is), and, as any linear mode, by the measured excitation's second harmonic ``E₂``
+(a shaker's distortion); the filter leaks the locked mode's own second harmonic ``X₂``,
+not divided by the detuning: ``P₂ = (c₀ a² + c_E E₂)/D₂(2ω) + c_X X₂``.
+For a trial ``ω₂ = r ω₁`` the fit is linear: the
 *profile* over ``r`` is the ``χ²`` it takes off against a mode too far to resonate (``D₂``
 constant over the levels), in units of the best fit's residual variance; each assembly's
 mode may lie within :data:`ALLOWANCE` of the campaign's (assemblies scatter). As the
@@ -34,12 +37,15 @@ takes at least ``SEPARATION`` off the far mode's fit. Of the located routes the 
 takes most is the answer.
 
 
-What the participation cannot say is whether the mode *exchanges* energy with the locked one:
-the modal filter's leak of the locked mode (a constant ratio) lies in the span of the
-basis over ``D₂`` (``Δk/D₂ = D₂₀/D₂ − 1``), so the joint's drive cannot be told from it, and
-a shaker's distortion drives a linear mode at ``2ω`` as a coupling does (on the rig with its
-second mode uncoupled, tuning seed 1, the second harmonic located a resonance). It places a
-mode that the criticism names (:mod:`~identification.criticism.second_mode`); it names none.
+**Exchange** (:attr:`ParticipationLocation.exchanges`). At ``2ω`` the coupling's column is
+what a linear mode lacks: where the second harmonic is located, the ``χ²`` the coupling's
+drive takes off beside the excitation's and the leak's (each curve's mode re-placed within
+the allowance without it) must exceed the ``1 − EXCHANGE_LEVEL`` quantile of ``χ²`` with two
+degrees per curve: then the participation *names* the mode (a second mode takes energy from
+the locked one at twice its frequency). At the fundamental it cannot: the filter's leak
+(a constant ratio) lies in the span of the basis over ``D₂`` (``Δk/D₂ = D₂₀/D₂ − 1``), so the
+joint's drive cannot be told from it; there the participation only places a mode the
+criticism names.
 """
 
 from __future__ import annotations
@@ -49,6 +55,7 @@ from functools import cached_property
 
 import numpy as np
 import pandas as pd
+from scipy.stats import chi2
 
 from identification.criticism.config import SEPARATION
 from identification.criticism.mode_refit import (
@@ -60,7 +67,7 @@ from identification.criticism.mode_refit import (
 
 __all__ = [
     "ALLOWANCE",
-    "BASIS",
+    "EXCHANGE_LEVEL",
     "ROUTES",
     "ModeParticipation",
     "ParticipationCurve",
@@ -75,13 +82,12 @@ ROUTES: dict[str, tuple[int, np.ndarray]] = {
     JOINT_ROUTE: (1, np.round(np.arange(0.8, 1.25 + 1e-9, 0.005), 4)),
     COUPLING_ROUTE: (2, np.round(np.arange(1.6, 2.4 + 1e-9, 0.005), 4)),
 }
+#: The level of the exchange's test at the second harmonic
+#: (:attr:`ParticipationLocation.exchanges`).
+EXCHANGE_LEVEL = 0.01
 #: How far (relative) one assembly's second mode may lie from the campaign's: assemblies
 #: scatter in frequency, a few tenths of a per cent to a per cent.
 ALLOWANCE = 0.01
-#: What drives the other mode, per curve (module notes): a constant (the filter's leak, a
-#: quadratic coupling), the locked mode's stiffness change (the joint) and its damping force
-#: (the base under phase-locked control).
-BASIS = ("constant", "stiffness change", "damping force")
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,6 +103,12 @@ class ParticipationCurve:
         phase against ``k`` times the locked mode's fundamental.
     label
         The curve's label.
+    drive
+        ``(n, K)`` complex: the measured excitation's harmonics (its own unit; None: not
+        measured) — what a linear mode answers at ``kω``.
+    own_m
+        ``(n, K)`` complex: the locked mode's own harmonics (m; None: not read) — what the
+        modal filter leaks into the other mode's coordinate.
     """
 
     amplitude_m: np.ndarray
@@ -104,6 +116,8 @@ class ParticipationCurve:
     damping_ratio: np.ndarray
     harmonics_m: np.ndarray
     label: str = ""
+    drive: np.ndarray | None = None
+    own_m: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,16 +163,22 @@ class ModeParticipation:
         )
         curves = []
         for label, rows in locked.groupby("curve", sort=False):
-            parts = [
-                1e-3 * rows[f"mode{other}_h{k}_amplitude_mm"].to_numpy(float)
-                * np.exp(1j * np.radians(rows[f"mode{other}_h{k}_phase_deg"].to_numpy(float)))
-                for k in harmonics
-            ]  # fmt: skip
+            parts, own = (
+                np.column_stack([_harmonic(rows, m, k) for k in harmonics]) for m in (other, mode)
+            )
             curves.append(ParticipationCurve(
                 1e-3 * rows["amplitude_mm"].to_numpy(float), rows["frequency_hz"].to_numpy(float),
-                rows["damping_ratio"].to_numpy(float), np.column_stack(parts), str(label),
+                rows["damping_ratio"].to_numpy(float), parts, str(label),
+                drive=_drive(rows, harmonics), own_m=own,
             ))  # fmt: skip
         return cls(tuple(curves), other, source)
+
+    def top_share(self, harmonic: int) -> tuple[float, float]:
+        """``(|P_k|/a, a in mm)`` at the highest hold of all curves."""
+        curve = max(self.curves, key=lambda c: c.amplitude_m.max())
+        top = int(np.argmax(curve.amplitude_m))
+        a = float(curve.amplitude_m[top])
+        return float(abs(curve.harmonics_m[top, harmonic - 1]) / a), 1e3 * a
 
     def reference(self) -> tuple[float, float]:
         """``(ω₁/2π, ζ₂)``: the frequency and damping ratio at each curve's lowest hold,
@@ -168,6 +188,39 @@ class ModeParticipation:
         f = np.median([c.frequency_hz[i] for c, i in zip(self.curves, lowest, strict=True)])
         z = np.median([c.damping_ratio[i] for c, i in zip(self.curves, lowest, strict=True)])
         return float(f), float(z)
+
+
+def _harmonic(rows: pd.DataFrame, mode: int, k: int) -> np.ndarray:
+    """Harmonic ``k`` of ``mode``'s coordinate at the rows (m, complex; 0 where not read)."""
+    amplitude, phase = (f"mode{mode}_h{k}_amplitude_mm", f"mode{mode}_h{k}_phase_deg")
+    if amplitude not in rows.columns:
+        return np.zeros(len(rows), dtype=complex)
+    value = (
+        1e-3
+        * rows[amplitude].to_numpy(float)
+        * np.exp(1j * np.radians(rows[phase].to_numpy(float)))
+    )
+    return np.nan_to_num(value)
+
+
+def _drive(rows: pd.DataFrame, harmonics: list[int]) -> np.ndarray | None:
+    """The measured excitation's harmonics at the rows (its level times each harmonic's
+    part of it), or None where the table carries no excitation."""
+    if "excitation_level" not in rows.columns or rows["excitation_level"].isna().any():
+        return None
+    level = rows["excitation_level"].to_numpy(float)
+    out = []
+    for k in harmonics:
+        cos, sin = f"excitation_harmonic{k}_cos", f"excitation_harmonic{k}_sin"
+        if k == 1:
+            out.append(level.astype(complex))
+        elif cos in rows.columns:
+            out.append(
+                level * np.nan_to_num(rows[cos].to_numpy(float) - 1j * rows[sin].to_numpy(float))
+            )
+        else:
+            out.append(np.zeros(level.size, dtype=complex))
+    return np.column_stack(out)
 
 
 def locked_mode(table: pd.DataFrame, source: str = "table") -> int:
@@ -187,16 +240,25 @@ def locked_mode(table: pd.DataFrame, source: str = "table") -> int:
     return int(locked.astype(int).mode().iloc[0])
 
 
-def _basis(curve: ParticipationCurve, omega_ref: float, harmonic: int) -> np.ndarray:
-    """``(n, 3)`` :data:`BASIS` at the curve's holds (``(n, 1)``, the constant, at the
-    second harmonic: what feeds it per ``a²``)."""
-    omega = 2 * np.pi * curve.frequency_hz
-    if harmonic == 2:
-        return np.ones((omega.size, 1))
-    return np.column_stack([
-        np.ones(omega.size), (omega**2 - omega_ref**2) / omega_ref**2,
-        1j * curve.damping_ratio * omega**2 / omega_ref**2,
-    ])  # fmt: skip
+def _columns(
+    curve: ParticipationCurve, omega_ref: float, harmonic: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """What drives the other mode at the curve's holds (module notes), in m: ``(n, p)``
+    columns a resonance divides (the exchange's first) and ``(n, q)`` columns it does not."""
+    a = curve.amplitude_m
+    if harmonic == 1:
+        omega = 2 * np.pi * curve.frequency_hz
+        resonant = a[:, None] * np.column_stack([
+            np.ones(a.size), (omega**2 - omega_ref**2) / omega_ref**2,
+            1j * curve.damping_ratio * omega**2 / omega_ref**2,
+        ])  # fmt: skip
+        return resonant, np.zeros((a.size, 0))
+    resonant = [a**2]
+    if curve.drive is not None and curve.drive.shape[1] >= 2 and np.any(curve.drive[:, 1]):
+        resonant.append(curve.drive[:, 1])
+    plain = [] if curve.own_m is None or curve.own_m.shape[1] < 2 else [curve.own_m[:, 1]]
+    plain = [c for c in plain if np.any(c)]
+    return np.column_stack(resonant), np.column_stack(plain) if plain else np.zeros((a.size, 0))
 
 
 def _residual(columns: np.ndarray, target: np.ndarray) -> float:
@@ -219,31 +281,40 @@ class _Route:
         at_hz = self.ratios * self.first_hz / self.harmonic
         self.crossed = (at_hz >= span.min() - widen) & (at_hz <= span.max() + widen)
 
-    @cached_property
-    def rss(self) -> np.ndarray:
+    def residuals(self, exchange: bool = True) -> np.ndarray:
         """``(R,)`` the residual sum of squares at each ratio, each curve's mode where it
-        fits best within :data:`ALLOWANCE` of the ratio (inf where not tried)."""
+        fits best within :data:`ALLOWANCE` of the ratio (inf where not tried); without the
+        exchange's column where ``exchange`` is False."""
         k, omega_ref = self.harmonic, self.omega_ref
         total = np.zeros(self.ratios.size)
         for c in self.curves:
             drive = k * 2 * np.pi * c.frequency_hz
-            columns = (c.amplitude_m**k)[:, None] * _basis(c, omega_ref, k)
+            resonant, plain = _columns(c, omega_ref, k)
+            if not exchange:
+                resonant = resonant[:, 1:]
             own = np.full(self.ratios.size, np.inf)
             for i in np.flatnonzero(~self.crossed):
                 omega2 = self.ratios[i] * omega_ref
                 detuning = (omega2**2 - drive**2 + 2j * self.zeta * omega2 * drive) / omega_ref**2
-                own[i] = _residual(columns / detuning[:, None], c.harmonics_m[:, k - 1])
+                columns = np.column_stack([resonant / detuning[:, None], plain])
+                own[i] = _residual(columns, c.harmonics_m[:, k - 1])
             total += [own[np.abs(self.ratios / r - 1) <= ALLOWANCE].min() for r in self.ratios]
         total[self.crossed] = np.inf
         return total
+
+    @cached_property
+    def rss(self) -> np.ndarray:
+        """:meth:`residuals` with every column."""
+        return self.residuals()
 
     @cached_property
     def variance(self) -> float:
         """The best fit's residual variance per real number."""
         k = self.harmonic
         n_real = 2 * sum(c.amplitude_m.size for c in self.curves)
-        n_basis = _basis(self.curves[0], self.omega_ref, k).shape[1]
-        dof = max(n_real - 2 * n_basis * len(self.curves) - 1, 1)
+        n_columns = sum(sum(m.shape[1] for m in _columns(c, self.omega_ref, k))
+                        for c in self.curves)  # fmt: skip
+        dof = max(n_real - 2 * n_columns - 1, 1)
         return max(float(np.min(self.rss)) / dof, np.finfo(float).tiny)
 
     @cached_property
@@ -251,13 +322,27 @@ class _Route:
         """The χ² the resonance takes off a mode too far to resonate, at each ratio."""
         k = self.harmonic
         far = sum(
-            _residual((c.amplitude_m**k)[:, None] * _basis(c, self.omega_ref, k),
-                      c.harmonics_m[:, k - 1])
+            _residual(np.column_stack(_columns(c, self.omega_ref, k)), c.harmonics_m[:, k - 1])
             for c in self.curves
-        )  # fmt: skip
+        )
         gain = np.where(np.isfinite(self.rss), (far - self.rss) / self.variance, -np.inf)
         return RefitProfile(self.route, self.ratios, gain, np.zeros((self.ratios.size, 0)),
                             self.first_hz, method="participation")  # fmt: skip
+
+    def exchange(self) -> float:
+        """At the second harmonic, the χ² the coupling's drive (``a²`` over the detuning)
+        takes off at the best ratio beside the measured excitation's second harmonic and
+        the filter's leak; NaN at the fundamental (module notes)."""
+        if self.harmonic != 2:
+            return float("nan")
+        best = self.profile.best
+        return float((self.residuals(exchange=False)[best] - self.rss[best]) / self.variance)
+
+    @property
+    def exchange_threshold(self) -> float:
+        """The ``1 − EXCHANGE_LEVEL`` quantile of χ² with two degrees per curve (one complex
+        coefficient each)."""
+        return float(chi2.ppf(1 - EXCHANGE_LEVEL, 2 * len(self.curves)))
 
 
 def participation_profiles(participation: ModeParticipation) -> list[RefitProfile]:
@@ -281,14 +366,25 @@ class ParticipationLocation:
         that takes most).
     why_not_located
         Empty where located; else why not.
+    exchange, exchange_threshold
+        The χ² the coupling's drive takes off at the located frequency (second harmonic;
+        NaN elsewhere) and the threshold it must exceed to name the mode.
     """
 
     profile: RefitProfile
     why_not_located: str
+    exchange: float = float("nan")
+    exchange_threshold: float = float("nan")
 
     @property
     def located(self) -> bool:
         return not self.why_not_located
+
+    @property
+    def exchanges(self) -> bool:
+        """Located at the second harmonic, and the coupling's drive takes more than its
+        threshold off: the mode takes energy from the locked one at ``2ω``."""
+        return self.located and self.exchange > self.exchange_threshold
 
 
 def locate_by_participation(participation: ModeParticipation) -> ParticipationLocation:
@@ -313,6 +409,7 @@ def locate_by_participation(participation: ModeParticipation) -> ParticipationLo
                 f"the {profile.route} route's participation is not shaped by a resonance: a "
                 f"mode too far to resonate fits it within Δχ² {SEPARATION:g}"
             )
-        answers.append(ParticipationLocation(profile, why))
+        exchange = route.exchange() if not why else float("nan")
+        answers.append(ParticipationLocation(profile, why, exchange, route.exchange_threshold))
     located = [a for a in answers if a.located]
     return max(located or answers, key=lambda a: a.profile.gain)

@@ -102,7 +102,12 @@ them where none is located).
 **Multi-point records place it directly.** Where the records carry the other mode's own
 coordinate (``backbones --modes 2``), its participation at the holds places the named
 mode (:mod:`~identification.criticism.participation`: its detuning as the backbone moves)
-and the refit is not needed; where it does not locate, the refit answers as above.
+and the refit is not needed; where it does not locate, the refit answers as above. Where
+its second harmonic is located and the coupling's drive (``∝ a²``, beside the measured
+excitation's second harmonic and the filter's leak) takes more than its threshold off,
+the participation *names* the mode without the screen: a mode that takes energy from the
+criticised one at twice its frequency, which a linear mode driven by the shaker's
+distortion does not.
 """
 
 from __future__ import annotations
@@ -119,7 +124,11 @@ from identification.criticism import calibration as cal
 from identification.criticism.config import LINEAR_PAIR, SEPARATION
 from identification.criticism.directions import Direction, mean_prediction
 from identification.criticism.mode_refit import RefitProfile, refit_profiles
-from identification.criticism.participation import ModeParticipation, locate_by_participation
+from identification.criticism.participation import (
+    ModeParticipation,
+    ParticipationLocation,
+    locate_by_participation,
+)
 from identification.effects import CATALOGUE
 from identification.multimode.solve import energy_shares
 
@@ -487,6 +496,10 @@ class SecondMode:
         What placed the frequency: ``"participation"`` (the other mode's coordinate in
         multi-point records, :mod:`~identification.criticism.participation`), ``"refit"``
         (the two-mode refit of one response point's backbone); empty where not located.
+    named_by, exchange
+        What named it: ``"screen"`` (the calibrated rule on the backbone) or
+        ``"participation"`` (the coupling's drive of the other mode's coordinate at ``2ω``);
+        empty where not named. The χ² that drive takes off (NaN where not measured).
     """
 
     named: bool
@@ -505,6 +518,8 @@ class SecondMode:
     location: str = ""
     screen_frequency_hz: float = float("nan")
     located_by: str = ""
+    named_by: str = ""
+    exchange: float = float("nan")
 
     @property
     def text(self) -> str:
@@ -656,7 +671,11 @@ class _Search:
         gain = float(self.gains[best])
         catalogue = max(float(decision.observed.catalogue[0]), self.catalogue_refit_gain)
         why, threshold = "", float("nan")
-        if not self.located.any():
+        answer = self.participation_answer
+        by_participation = answer is not None and answer.exchanges
+        if by_participation:
+            why = ""  # named by its participation (module notes): the screen is not needed
+        elif not self.located.any():
             why = (
                 "the linear screen locates no mode: none gains more than a mode at either end of "
                 f"its grid by {SEPARATION:g}"
@@ -690,25 +709,42 @@ class _Search:
             gain=gain,
             threshold=threshold,
             catalogue_gain=catalogue,
-            where=self.where(route, refit.frequency_hz if located else None),
+            where=(*self.measured_where(refit if located else None),
+                   *self.where(route, refit.frequency_hz if located else None)),
             why=why,
             located=located,
             interval_hz=refit.interval_hz if located else (nan, nan),
             location=location,
             screen_frequency_hz=float(modes.ratios[route] * modes.first_frequency_hz),
             located_by=refit.method if located else "",
-        )
+            named_by="" if why else (PARTICIPATION if by_participation else "screen"),
+            exchange=float("nan") if answer is None else answer.exchange,
+        )  # fmt: skip
+
+    @cached_property
+    def participation_answer(self) -> ParticipationLocation | None:
+        """What the other mode's participation says (None where the records carry none)."""
+        given = self.participation() if callable(self.participation) else self.participation
+        return None if given is None else locate_by_participation(given)
 
     def placed(self) -> RefitProfile:
         """The profile that places the named mode: its participation's where the records
         carry it and it locates the mode, else the two-mode refit's best route
         (:func:`~.mode_refit.refit_profiles`)."""
-        given = self.participation() if callable(self.participation) else self.participation
-        if given is not None:
-            answer = locate_by_participation(given)
-            if answer.located:
-                return answer.profile
+        answer = self.participation_answer
+        if answer is not None and answer.located:
+            return answer.profile
         return max(refit_profiles(self.decision), key=lambda p: p.gain)
+
+    def measured_where(self, placed: RefitProfile | None) -> tuple[str, ...]:
+        """The other mode's coordinate at the sensors, in words, where it placed the mode."""
+        if placed is None or placed.method != PARTICIPATION:
+            return ()
+        given = self.participation() if callable(self.participation) else self.participation
+        harmonic = 2 if placed.route == COUPLING else 1
+        share, at_mm = given.top_share(harmonic)
+        return (f"measured at the sensors: the second mode's harmonic {harmonic} reaches "
+                f"{100 * share:.2g} % of the response amplitude at {at_mm:.2g} mm",)  # fmt: skip
 
     def coefficient(self, index: int) -> float:
         """Column ``index``'s coefficient per unit of its physical coefficient: from the
