@@ -297,8 +297,9 @@ def _start(model: JointModel, measured: BackboneSet) -> JointModel:
 
 def campaign(case: str, seed: int) -> tuple[BackboneSet, JointModel, float, Participation]:
     """The campaign of ``case`` at ``seed``: backbones, the one-mode start model fitted to
-    them, the truth's second-mode frequency (NaN for one-mode data) and the second mode's
-    participation where the campaign has several response points (None: one)."""
+    them, the truth's second-mode frequency (NaN for one-mode data; the uncoupled mode's
+    where it has one) and the second mode's participation where the campaign has several
+    response points (None: one)."""
     if case in TWO_MODE_CASES:
         rig, ratio = TWO_MODE_CASES[case]
         if rig == "two-mode":
@@ -312,8 +313,8 @@ def campaign(case: str, seed: int) -> tuple[BackboneSet, JointModel, float, Part
         mode = preset.lab["second_mode"]
         truth = mode.frequency_ratio * preset.model.linear_frequency_hz
     elif case in UNCOUPLED_CASES:
-        measured, _, part = _two_mode_rig_campaign(UNCOUPLED_CASES[case], seed, uncoupled=True)
-        return measured, _start(RIG_PRESETS[_TWO_MODE_START].model, measured), float("nan"), part
+        measured, truth, part = _two_mode_rig_campaign(UNCOUPLED_CASES[case], seed, uncoupled=True)
+        return measured, _start(RIG_PRESETS[_TWO_MODE_START].model, measured), truth, part
     elif case in ONE_MODE_CASES:
         preset, truth = RIG_PRESETS[case], float("nan")
         rig = case

@@ -36,7 +36,6 @@ sides, nothing 5 % and more apart within :data:`~.config.SEPARATION`; and the re
 takes at least ``SEPARATION`` off the far mode's fit. Of the located routes the one that
 takes most is the answer.
 
-
 **Exchange** (:attr:`ParticipationLocation.exchanges`). At ``2ω`` the coupling's column is
 what a linear mode lacks: where the second harmonic is located, the ``χ²`` the coupling's
 drive takes off beside the excitation's and the leak's (each curve's mode re-placed within
@@ -44,12 +43,15 @@ the allowance without it) must exceed the ``1 − EXCHANGE_LEVEL`` quantile of `
 degrees per curve: then the participation *names* the mode (a second mode takes energy from
 the locked one at twice its frequency). At the fundamental it cannot: the filter's leak
 (a constant ratio) lies in the span of the basis over ``D₂`` (``Δk/D₂ = D₂₀/D₂ − 1``), so the
-joint's drive cannot be told from it; there the participation only places a mode the
-criticism names.
+joint's drive cannot be told from it; and a linear mode's fit — the measured excitation
+over the detuning, the leak beside it — left 700–2 700 χ² units to a joint's drive on the
+rig with its second mode uncoupled (tuning seeds 1–3; which of the rig's artefacts does it
+is not settled). There the participation only places a mode the criticism names.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -240,11 +242,30 @@ def locked_mode(table: pd.DataFrame, source: str = "table") -> int:
     return int(locked.astype(int).mode().iloc[0])
 
 
-def _columns(
+def _linear_columns(
     curve: ParticipationCurve, omega_ref: float, harmonic: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """What drives the other mode at the curve's holds (module notes), in m: ``(n, p)``
-    columns a resonance divides (the exchange's first) and ``(n, q)`` columns it does not."""
+    """What a linear mode that exchanges nothing answers at ``2ω``, in m (module notes):
+    ``(n, p)`` columns a resonance divides — the measured excitation's second harmonic —
+    and ``(n, q)`` columns it does not: the filter's leak of the locked mode's own."""
+    n, k = curve.amplitude_m.size, harmonic
+    drive = None if curve.drive is None or curve.drive.shape[1] < k else curve.drive[:, k - 1]
+    own = None if curve.own_m is None or curve.own_m.shape[1] < k else curve.own_m[:, k - 1]
+    resonant, plain = ([c] if c is not None and np.any(c) else [] for c in (drive, own))
+    return _stack(resonant, n), _stack(plain, n)
+
+
+def _exchange_columns(curve: ParticipationCurve, omega_ref: float, harmonic: int) -> np.ndarray:
+    """``(n, 1)`` what the coupling adds to the drive at ``2ω``, over the detuning: ``a²``."""
+    return curve.amplitude_m[:, None] ** 2
+
+
+def _location_columns(
+    curve: ParticipationCurve, omega_ref: float, harmonic: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The columns that place the mode (module notes): at the fundamental ``a`` times
+    a constant, the stiffness change and the damping force, all over the detuning; at
+    ``2ω`` the exchange's and a linear mode's."""
     a = curve.amplitude_m
     if harmonic == 1:
         omega = 2 * np.pi * curve.frequency_hz
@@ -253,12 +274,23 @@ def _columns(
             1j * curve.damping_ratio * omega**2 / omega_ref**2,
         ])  # fmt: skip
         return resonant, np.zeros((a.size, 0))
-    resonant = [a**2]
-    if curve.drive is not None and curve.drive.shape[1] >= 2 and np.any(curve.drive[:, 1]):
-        resonant.append(curve.drive[:, 1])
-    plain = [] if curve.own_m is None or curve.own_m.shape[1] < 2 else [curve.own_m[:, 1]]
-    plain = [c for c in plain if np.any(c)]
-    return np.column_stack(resonant), np.column_stack(plain) if plain else np.zeros((a.size, 0))
+    return _with_exchange(curve, omega_ref, harmonic)
+
+
+def _with_exchange(
+    curve: ParticipationCurve, omega_ref: float, harmonic: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_linear_columns` with :func:`_exchange_columns` among the resonant ones."""
+    resonant, plain = _linear_columns(curve, omega_ref, harmonic)
+    return np.column_stack([_exchange_columns(curve, omega_ref, harmonic), resonant]), plain
+
+
+def _stack(columns: list[np.ndarray], n: int) -> np.ndarray:
+    return np.column_stack(columns) if columns else np.zeros((n, 0), dtype=complex)
+
+
+#: A curve's fitted columns: ``(curve, ω_ref, k) → (over the detuning, beside it)``.
+type Columns = Callable[[ParticipationCurve, float, int], tuple[np.ndarray, np.ndarray]]
 
 
 def _residual(columns: np.ndarray, target: np.ndarray) -> float:
@@ -281,68 +313,68 @@ class _Route:
         at_hz = self.ratios * self.first_hz / self.harmonic
         self.crossed = (at_hz >= span.min() - widen) & (at_hz <= span.max() + widen)
 
-    def residuals(self, exchange: bool = True) -> np.ndarray:
-        """``(R,)`` the residual sum of squares at each ratio, each curve's mode where it
-        fits best within :data:`ALLOWANCE` of the ratio (inf where not tried); without the
-        exchange's column where ``exchange`` is False."""
+    def residuals(self, columns: Columns) -> np.ndarray:
+        """``(R,)`` the residual sum of squares at each ratio of the fit of ``columns``
+        (resonant ones over the detuning), each curve's mode where it fits best within
+        :data:`ALLOWANCE` of the ratio (inf where not tried)."""
         k, omega_ref = self.harmonic, self.omega_ref
         total = np.zeros(self.ratios.size)
         for c in self.curves:
             drive = k * 2 * np.pi * c.frequency_hz
-            resonant, plain = _columns(c, omega_ref, k)
-            if not exchange:
-                resonant = resonant[:, 1:]
+            resonant, plain = columns(c, omega_ref, k)
             own = np.full(self.ratios.size, np.inf)
             for i in np.flatnonzero(~self.crossed):
                 omega2 = self.ratios[i] * omega_ref
                 detuning = (omega2**2 - drive**2 + 2j * self.zeta * omega2 * drive) / omega_ref**2
-                columns = np.column_stack([resonant / detuning[:, None], plain])
-                own[i] = _residual(columns, c.harmonics_m[:, k - 1])
+                fitted = np.column_stack([resonant / detuning[:, None], plain])
+                own[i] = _residual(fitted, c.harmonics_m[:, k - 1])
             total += [own[np.abs(self.ratios / r - 1) <= ALLOWANCE].min() for r in self.ratios]
         total[self.crossed] = np.inf
         return total
 
-    @cached_property
-    def rss(self) -> np.ndarray:
-        """:meth:`residuals` with every column."""
-        return self.residuals()
-
-    @cached_property
-    def variance(self) -> float:
-        """The best fit's residual variance per real number."""
+    def variance(self, columns: Columns, rss: float) -> float:
+        """The residual variance per real number of a fit of ``columns`` whose sum of
+        squares is ``rss``."""
         k = self.harmonic
         n_real = 2 * sum(c.amplitude_m.size for c in self.curves)
-        n_columns = sum(sum(m.shape[1] for m in _columns(c, self.omega_ref, k))
+        n_columns = sum(sum(m.shape[1] for m in columns(c, self.omega_ref, k))
                         for c in self.curves)  # fmt: skip
         dof = max(n_real - 2 * n_columns - 1, 1)
-        return max(float(np.min(self.rss)) / dof, np.finfo(float).tiny)
+        return max(rss / dof, np.finfo(float).tiny)
 
     @cached_property
     def profile(self) -> RefitProfile:
         """The χ² the resonance takes off a mode too far to resonate, at each ratio."""
         k = self.harmonic
+        rss = self.residuals(_location_columns)
         far = sum(
-            _residual(np.column_stack(_columns(c, self.omega_ref, k)), c.harmonics_m[:, k - 1])
+            _residual(np.column_stack(_location_columns(c, self.omega_ref, k)),
+                      c.harmonics_m[:, k - 1])
             for c in self.curves
-        )
-        gain = np.where(np.isfinite(self.rss), (far - self.rss) / self.variance, -np.inf)
+        )  # fmt: skip
+        variance = self.variance(_location_columns, float(np.min(rss)))
+        gain = np.where(np.isfinite(rss), (far - rss) / variance, -np.inf)
         return RefitProfile(self.route, self.ratios, gain, np.zeros((self.ratios.size, 0)),
                             self.first_hz, method="participation")  # fmt: skip
 
     def exchange(self) -> float:
-        """At the second harmonic, the χ² the coupling's drive (``a²`` over the detuning)
-        takes off at the best ratio beside the measured excitation's second harmonic and
-        the filter's leak; NaN at the fundamental (module notes)."""
+        """At ``2ω`` the χ² the coupling's drive (:func:`_exchange_columns`) takes off a
+        linear mode's fit (:func:`_linear_columns`) at the best ratio, each curve's mode
+        re-placed within the allowance, in units of the exchange's fit's residual variance;
+        NaN at the fundamental (module notes)."""
         if self.harmonic != 2:
             return float("nan")
         best = self.profile.best
-        return float((self.residuals(exchange=False)[best] - self.rss[best]) / self.variance)
+        with_exchange = float(self.residuals(_with_exchange)[best])
+        linear = float(self.residuals(_linear_columns)[best])
+        return (linear - with_exchange) / self.variance(_with_exchange, with_exchange)
 
     @property
     def exchange_threshold(self) -> float:
-        """The ``1 − EXCHANGE_LEVEL`` quantile of χ² with two degrees per curve (one complex
-        coefficient each)."""
-        return float(chi2.ppf(1 - EXCHANGE_LEVEL, 2 * len(self.curves)))
+        """The ``1 − EXCHANGE_LEVEL`` quantile of χ² with two degrees per exchange column and
+        curve (one complex coefficient each)."""
+        n = _exchange_columns(self.curves[0], self.omega_ref, self.harmonic).shape[1]
+        return float(chi2.ppf(1 - EXCHANGE_LEVEL, 2 * n * len(self.curves)))
 
 
 def participation_profiles(participation: ModeParticipation) -> list[RefitProfile]:
@@ -367,8 +399,8 @@ class ParticipationLocation:
     why_not_located
         Empty where located; else why not.
     exchange, exchange_threshold
-        The χ² the coupling's drive takes off at the located frequency (second harmonic;
-        NaN elsewhere) and the threshold it must exceed to name the mode.
+        The χ² the exchange's drive takes off at the located frequency (NaN where not
+        located) and the threshold it must exceed to name the mode.
     """
 
     profile: RefitProfile
@@ -382,8 +414,8 @@ class ParticipationLocation:
 
     @property
     def exchanges(self) -> bool:
-        """Located at the second harmonic, and the coupling's drive takes more than its
-        threshold off: the mode takes energy from the locked one at ``2ω``."""
+        """Located, and the exchange's drive takes more than its threshold off: the mode
+        takes energy from the locked one (module notes)."""
         return self.located and self.exchange > self.exchange_threshold
 
 
