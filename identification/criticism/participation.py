@@ -33,8 +33,10 @@ route) and the second harmonic near twice the first (1.6–2.4, the coupling's).
 is not tried. **Located** is the two-mode refit's rule
 (:class:`~identification.criticism.mode_refit.RefitProfile`): solved neighbours on both
 sides, nothing 5 % and more apart within :data:`~.config.SEPARATION`; and the resonance
-takes at least ``SEPARATION`` off the far mode's fit. Of the located routes the one that
-takes most is the answer.
+takes at least ``SEPARATION`` off the far mode's fit and off both ends of its grid (a
+profile that rises towards an end says a mode beyond it: a mode near 1:1 that a coupling
+drives at ``2ω`` off resonance, tuning seeds 1–40 of the independent simulator). Of the
+located routes the one that takes most is the answer.
 
 **Exchange** (:attr:`ParticipationLocation.exchanges`). At ``2ω`` the coupling's column is
 what a linear mode lacks: where the second harmonic is located, the ``χ²`` the coupling's
@@ -440,6 +442,12 @@ def locate_by_participation(participation: ModeParticipation) -> ParticipationLo
             why = (
                 f"the {profile.route} route's participation is not shaped by a resonance: a "
                 f"mode too far to resonate fits it within Δχ² {SEPARATION:g}"
+            )
+        solved = profile.profile[np.isfinite(profile.profile)]
+        if not why and profile.gain - max(solved[0], solved[-1]) < SEPARATION:
+            why = (
+                f"the {profile.route} route's participation rises towards the end of its grid: "
+                "a mode beyond it, not where"
             )
         exchange = route.exchange() if not why else float("nan")
         answers.append(ParticipationLocation(profile, why, exchange, route.exchange_threshold))
