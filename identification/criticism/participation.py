@@ -177,12 +177,14 @@ class ModeParticipation:
             ))  # fmt: skip
         return cls(tuple(curves), other, source)
 
-    def top_share(self, harmonic: int) -> tuple[float, float]:
-        """``(|P_k|/a, a in mm)`` at the highest hold of all curves."""
+    def words(self, harmonic: int) -> str:
+        """The other mode's harmonic at the highest hold of all curves, in words."""
         curve = max(self.curves, key=lambda c: c.amplitude_m.max())
         top = int(np.argmax(curve.amplitude_m))
         a = float(curve.amplitude_m[top])
-        return float(abs(curve.harmonics_m[top, harmonic - 1]) / a), 1e3 * a
+        share = abs(curve.harmonics_m[top, harmonic - 1]) / a
+        return (f"measured at the sensors: the second mode's harmonic {harmonic} reaches "
+                f"{100 * share:.2g} % of the response amplitude at {1e3 * a:.2g} mm")  # fmt: skip
 
     def reference(self) -> tuple[float, float]:
         """``(ω₁/2π, ζ₂)``: the frequency and damping ratio at each curve's lowest hold,

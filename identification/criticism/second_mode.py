@@ -1,11 +1,9 @@
 """A missing mode as a finding: a second mode that exchanges energy with the criticised one.
 
-A one-mode model criticised on data that carry a second mode sees physics it lacks — a
-backbone that flattens or bends as it nears the other mode, damping that rises where the
-energy leaves, a second harmonic that the other mode amplifies — and the catalogue offers
-effects that each mimic a part of it. This module asks the data whether a second mode
-explains them better than the catalogue's best effect, with the criticism's own
-linearised statistic and its own calibrated bootstrap.
+On data that carry a second mode, catalogue effects each mimic a part of what a one-mode
+model lacks (a backbone bent near the other mode, damping rising where the energy leaves,
+a second harmonic it amplifies). This module asks whether a second mode explains the data
+better, with the criticism's linearised statistic and calibrated bootstrap.
 
 **Two mechanisms, one column each per frequency.** With complex amplitudes at the levels
 (``ω(a)`` the refitted base model's backbone, ``a`` the response amplitude):
@@ -49,65 +47,39 @@ backbone would cross — ``ω₂`` (``ω₂/2`` at 1:2) within the backbone's fr
 widened by :data:`CROSSING_BANDWIDTHS` half-power bandwidths — gets no column: there the
 linearisation is singular, and a one-mode backbone could not pass it.
 
-**One mode, its two routes fitted together.** A mode at ``ω₂`` that shares the joint is
-also seen at the sensor and driven by the base (both at once on a real panel, and on the
-lab's and the two-mode rig's truths); a mode near ``2ω`` that a quadratic coupling feeds
-moves the backbone and the second harmonic at once. Each alone is a poor description of
-the mode: the linearised columns of one mode are fitted *together*
-(:func:`mode_routes`, :func:`route_gains`): through the joint (each weight ``w``) with
-seen at the sensor, through the coupling with the harmonic it feeds, each pair at one
-``ω₂``, by least squares in the criticism's whitened frame projected off the base model's
-directions, the exchange's coefficient (``b²``, ``κ²``) ≥ 0. A mode's gain is that fit's
-``Δχ²``: two coefficients, as a catalogue effect has its coefficient and its shape.
+**One mode, its two routes fitted together** (:func:`mode_routes`, :func:`route_gains`):
+a mode sharing the joint is also seen at the sensor and driven by the base; a mode near
+``2ω`` moves the backbone and the second harmonic at once. Each pair at one ``ω₂`` is
+fitted by least squares in the criticism's whitened frame projected off the base model's
+directions, the exchange's coefficient (``b²``, ``κ²``) ≥ 0; its ``Δχ²`` is the mode's gain.
 
 **The rule** (fixed before the study, ``docs/criticism.md``, "A missing mode"). A second
 mode is named when
 
-1. the screen locates a mode — its *prominence*, its gain less the larger of its
-   family's two grid-end gains (where the mode is far and the columns catalogue-like
-   shapes of no frequency), is at least :data:`~.config.SEPARATION` — and of the located
-   modes the one that fits best (the largest gain) has a gain above its own threshold, the
-   ``1 − α'`` quantile of the largest mode gain over the decision's bootstrap campaigns
-   (the same campaigns, each whitened in its own re-estimated covariance, ``α'`` the level
-   each of the decision's two tests holds: :attr:`Calibration.level_each`); and
-2. it exceeds the catalogue's best gain by :data:`~.config.SEPARATION` (χ²₁, 1 %) — the
-   larger of its best column's linearised gain and its best admissible refit's ``Δχ²``
-   (a catalogue effect whose refit gains more than its linearisation shows, as x² beside
-   a start's ẋ², is judged by what it does): within that, the data cannot tell the mode
-   from the catalogue's effect, and the catalogue's answer stands.
+1. the screen locates a mode — its gain less the larger of its family's two grid-end
+   gains is at least :data:`~.config.SEPARATION` — and the best located mode's gain is
+   above the ``1 − α'`` quantile of the largest mode gain over the decision's bootstrap
+   campaigns (``α'``: :attr:`Calibration.level_each`); and
+2. it exceeds the catalogue's best gain — linearised or refitted, the larger — by
+   :data:`~.config.SEPARATION` (χ²₁, 1 %): within that the catalogue's answer stands.
 
-The decision need not fire: the mode's test is a third test on the decision's bootstrap,
-beside the catalogue's and the reference's at the level each of them holds, and aimed at
-one alternative it sees a 1:2 mode's small signature that the free-form reference spreads
-over its whole basis. On a campaign the base model explains, 1 passes with probability
-``α'``: a one-mode campaign names a mode with probability at most ``α'``, and the
-criticism (:attr:`~.criticism.Criticism.significant`) fires with at most ``α + α'``.
+The decision need not fire: the mode's test is a third test on the decision's bootstrap at
+the level each test holds, so a one-mode campaign names a mode with probability at most
+``α'`` and :attr:`~.criticism.Criticism.significant` fires with at most ``α + α'``.
 
-**The frequency is the refit's, never the screen's.** Near 1:1 a linearised column can fit
-best far from the truth (on the two-mode rig near 1:1, at twice the first mode's frequency
-or below it), so the screen names a mode but states no frequency. Where 1 and 2 name a
-mode, the two-mode refit (:mod:`~identification.criticism.mode_refit`: the base model and a
-second mode by the N-mode harmonic balance, its frequency, joint share, base participation
-and coupling fitted) gives each route's profile of Δχ² over the second mode's frequency; the
-best route *locates* the frequency where its best ratio has solved neighbours on both sides
-(not its grid's end, not the band the backbone crosses), no ratio more than 5 % from it
-fits within ``SEPARATION`` of it, and its gain exceeds the catalogue's best by
-``SEPARATION``. Then the finding states the
-frequency, its interval and the route; otherwise it is named "a second mode, frequency not
-located" with why (:attr:`SecondMode.location`) — the data of one sensor may not tell where
-a mode near 1:1 is, and the finding says so rather than a number. The route named is the
-refit's best; the share and where it shows come from the screen's fit (no frequency in
-them where none is located).
+**The frequency is the refit's, never the screen's** (near 1:1 a linearised column can
+fit best far from the truth). Where 1 and 2 name a mode, the two-mode refit
+(:mod:`~identification.criticism.mode_refit`) gives each route's profile over the second
+mode's frequency and *locates* it by its rule, its gain beyond the catalogue's best by
+``SEPARATION``; otherwise the mode is named "a second mode, frequency not located" with
+why (:attr:`SecondMode.location`). The share and where it shows come from the screen's fit.
 
 **Multi-point records place it directly.** Where the records carry the other mode's own
-coordinate (``backbones --modes 2``), its participation at the holds places the named
-mode (:mod:`~identification.criticism.participation`: its detuning as the backbone moves)
-and the refit is not needed; where it does not locate, the refit answers as above. Where
-its second harmonic is located and the coupling's drive (``∝ a²``, beside the measured
-excitation's second harmonic and the filter's leak) takes more than its threshold off,
-the participation *names* the mode without the screen: a mode that takes energy from the
-criticised one at twice its frequency, which a linear mode driven by the shaker's
-distortion does not.
+coordinate (``backbones --modes 2``), its participation places the named mode
+(:mod:`~identification.criticism.participation`), else the refit does. Where its second
+harmonic is located and the coupling's drive takes more than its threshold off, the
+participation *names* the mode without the screen: a mode that takes energy from the
+criticised one at twice its frequency, which a linear mode driven by the shaker does not.
 """
 
 from __future__ import annotations
@@ -464,9 +436,7 @@ class SecondMode:
         Whether the rule (module notes) names a second mode.
     mechanism
         :data:`JOINT`, :data:`SENSOR`, :data:`COUPLING` or :data:`HARMONIC`: the route
-        named, the exchange (joint, coupling) where its fitted coefficient is not 0, else
-        the other of its pair (the last two: one 1:2 mechanism, seen in the backbone or in
-        the second harmonic).
+        named (the exchange where its fitted coefficient is not 0, else its pair's other).
     ratio, frequency_hz
         Its frequency over the first mode's, and in Hz, where the two-mode refit locates it
         (:mod:`~identification.criticism.mode_refit`); NaN where it does not.
@@ -486,9 +456,8 @@ class SecondMode:
     why
         Why it was not named (empty when named).
     located, interval_hz, location
-        Whether the two-mode refit locates its frequency (run where the rule names a
-        mode), the interval the data place it in (Hz; NaN where not located), and why it is
-        not located (empty where it is, or where the refit did not run).
+        Whether its frequency is located (where named), the interval (Hz; NaN where not
+        located) and why not (empty where located or not named).
     screen_frequency_hz
         The linear screen's best column's frequency: a diagnostic, never a finding (near
         1:1 a linearised column may fit best far from the truth).
@@ -497,9 +466,8 @@ class SecondMode:
         multi-point records, :mod:`~identification.criticism.participation`), ``"refit"``
         (the two-mode refit of one response point's backbone); empty where not located.
     named_by, exchange
-        What named it: ``"screen"`` (the calibrated rule on the backbone) or
-        ``"participation"`` (the coupling's drive of the other mode's coordinate at ``2ω``);
-        empty where not named. The χ² that drive takes off (NaN where not measured).
+        What named it (``"screen"``, ``"participation"``: the coupling's drive of the other
+        mode's coordinate at ``2ω``; empty: not named) and that drive's χ² (NaN: none).
     """
 
     named: bool
@@ -722,10 +690,14 @@ class _Search:
         )  # fmt: skip
 
     @cached_property
+    def given(self) -> ModeParticipation | None:
+        """The other mode's participation (None where the records carry none)."""
+        return self.participation() if callable(self.participation) else self.participation
+
+    @cached_property
     def participation_answer(self) -> ParticipationLocation | None:
         """What the other mode's participation says (None where the records carry none)."""
-        given = self.participation() if callable(self.participation) else self.participation
-        return None if given is None else locate_by_participation(given)
+        return None if self.given is None else locate_by_participation(self.given)
 
     def placed(self) -> RefitProfile:
         """The profile that places the named mode: its participation's where the records
@@ -740,11 +712,7 @@ class _Search:
         """The other mode's coordinate at the sensors, in words, where it placed the mode."""
         if placed is None or placed.method != PARTICIPATION:
             return ()
-        given = self.participation() if callable(self.participation) else self.participation
-        harmonic = 2 if placed.route == COUPLING else 1
-        share, at_mm = given.top_share(harmonic)
-        return (f"measured at the sensors: the second mode's harmonic {harmonic} reaches "
-                f"{100 * share:.2g} % of the response amplitude at {at_mm:.2g} mm",)  # fmt: skip
+        return (self.given.words(2 if placed.route == COUPLING else 1),)
 
     def coefficient(self, index: int) -> float:
         """Column ``index``'s coefficient per unit of its physical coefficient: from the
