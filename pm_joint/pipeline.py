@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 import xarray as xr
 
 from identification.analytical import harmonic, pll
@@ -29,7 +28,7 @@ from identification.artifacts import atomic_write_text
 from identification.criticism.moves import run_rounds
 from identification.criticism.participation import ModeParticipation, locked_mode
 from identification.fitting.least_squares import default_free
-from identification.measurements.backbone import Backbone, BackboneSet
+from identification.measurements.backbone import Backbone, BackboneSet, read_backbone_table
 from identification.measurements.columns import ColumnCampaign
 from identification.measurements.decay import extract_decay_backbone
 from identification.measurements.decay_modes import (
@@ -387,14 +386,9 @@ def criticize_campaign(
     if not isinstance(model, JointModel):
         model = JointModel.from_json(model)
     participation = None
-    table = _modal_table(folder) if measured is None else None
-    if table is not None:
-        where = str(folder.source if isinstance(folder, Workspace) else folder)
-        measured = mode_backbones(table, locked_mode(table, where), source=where)
-        participation = ModeParticipation.from_table(table, where)
-    elif measured is None:
+    if measured is None:
         workspace = folder if isinstance(folder, Workspace) else Workspace(folder)
-        measured = workspace.backbones
+        measured, participation = _criticized_backbones(workspace)
     crit = criticize(
         model, measured, posterior=posterior, executor=executor, participation=participation
     )
@@ -403,20 +397,19 @@ def criticize_campaign(
     return crit
 
 
-def _modal_table(folder: str | os.PathLike | Workspace) -> pd.DataFrame | None:
-    """The table of ``folder`` (a workspace of a backbone CSV, or its path) when it is a
-    modal backbone CSV, else None."""
-    if isinstance(folder, Workspace):
-        if folder.is_campaign:
-            return None
-        folder = folder.source
-    if Path(folder).suffix.lower() != ".csv":
-        return None
-    table = pd.read_csv(folder, dtype={"curve": str, "source": str})
+def _criticized_backbones(
+    workspace: Workspace,
+) -> tuple[BackboneSet, ModeParticipation | None]:
+    """The backbones a criticism compares with, and the next mode's participation where
+    the workspace is a modal backbone table (a CSV with a ``mode`` column)."""
+    if workspace.is_campaign:
+        return workspace.backbones, None
+    where = str(workspace.source)
+    table = read_backbone_table(workspace.source)
     if "mode" not in table.columns:
-        return None
-    table["source"] = table["source"].fillna("") if "source" in table else ""
-    return table
+        return BackboneSet.from_table(table, source=where), None
+    measured = mode_backbones(table, locked_mode(table, where), source=where)
+    return measured, ModeParticipation.from_table(table, where)
 
 
 def label_records(

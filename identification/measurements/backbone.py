@@ -40,7 +40,7 @@ from scipy.interpolate import make_interp_spline
 
 from identification.artifacts import atomic_write_text
 
-__all__ = ["TABLE_COLUMNS", "Backbone", "BackboneSet"]
+__all__ = ["TABLE_COLUMNS", "Backbone", "BackboneSet", "read_backbone_table"]
 
 _BASE_COLUMNS = (
     "curve",
@@ -463,15 +463,7 @@ class BackboneSet(Sequence[Backbone]):
     @classmethod
     def from_csv(cls, path: str | Path) -> BackboneSet:
         """Read a CSV written by :meth:`to_csv`."""
-        path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"{path}: backbone table not found")
-        try:
-            table = pd.read_csv(path, keep_default_na=True, dtype={"curve": str, "source": str})
-        except (ValueError, pd.errors.ParserError) as exc:
-            raise ValueError(f"{path}: not a readable CSV table ({exc})") from None
-        table["source"] = table["source"].fillna("") if "source" in table else ""
-        return cls.from_table(table, source=str(path))
+        return cls.from_table(read_backbone_table(path), source=str(path))
 
     # ------------------------------------------------------------- figures
     def plot(self, ax=None):
@@ -551,3 +543,23 @@ def _hold_fit_fields(rows: pd.DataFrame) -> dict[str, np.ndarray | None]:
         "excitation_harmonics": complex_parts("excitation_harmonic", orders("excitation_harmonic")),
         "mean_offset_m": None if offset is None else 1e-3 * offset,
     }
+
+
+def read_backbone_table(path: str | Path) -> pd.DataFrame:
+    """The table of a backbone CSV (:meth:`BackboneSet.to_csv`, or the modal table of
+    ``pm-joint backbones --modes N``), curves and sources as text.
+
+    Raises
+    ------
+    ValueError
+        No such file, or not a readable CSV table.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: backbone table not found")
+    try:
+        table = pd.read_csv(path, keep_default_na=True, dtype={"curve": str, "source": str})
+    except (ValueError, pd.errors.ParserError) as exc:
+        raise ValueError(f"{path}: not a readable CSV table ({exc})") from None
+    table["source"] = table["source"].fillna("") if "source" in table else ""
+    return table
