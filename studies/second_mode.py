@@ -182,14 +182,12 @@ class SecondModeRow(Row):
 
 def _uncoupled_rig(ratio: float | None) -> ModalRig:
     """The two-mode rig with its second mode off the joint and without the coupling."""
-    preset = MODAL_RIG_PRESETS["two-mode"]
-    model = dataclasses.replace(preset.model(ratio), joint_shapes=((1.0, 0.0),), couplings=(),
+    model = dataclasses.replace(MODAL_RIG_PRESETS["two-mode"].model(ratio),
+                                joint_shapes=((1.0, 0.0),), couplings=(),
                                 name="two modes, uncoupled")  # fmt: skip
-    amplitudes = 1e-3 * np.geomspace(*preset.amplitude_range_mm[0], LEVELS)
-    return ModalRig.for_amplitudes(
-        model, amplitudes, variability=dict(preset.variability), name="two-mode uncoupled",
+    return ModalRig.preset(
+        "two-mode", levels=LEVELS, model=model, name="two-mode uncoupled",
         description="the two-mode rig, its second mode off the joint and uncoupled",
-        **preset.lab, test="pll",
     )  # fmt: skip
 
 

@@ -382,18 +382,23 @@ class ModalRig:
     def preset(
         cls,
         name: str,
+        /,
         levels: int = 10,
         amplitude_range_mm: tuple[float, float] | None = None,
         ratio: float | None = None,
         test: str = "pll",
         mode: int = 1,
+        model: ModalModel | None = None,
         **options: Any,
     ) -> ModalRig:
         """A rig from :data:`identification.rig.presets.MODAL_RIG_PRESETS`.
 
         ``ratio`` sets the second mode's frequency over the first's (default the
         preset's); the amplitudes (default the preset's range for the locked mode)
-        are spaced geometrically; ``test`` and ``mode`` pick the test.
+        are spaced geometrically; ``test`` and ``mode`` pick the test; ``model``
+        replaces the preset's model (a variant of it: the preset's lab, variability
+        and amplitudes kept); ``options`` override the preset's settings (the rig's own
+        ``name`` among them: the preset's name is positional).
         """
         from identification.rig.presets import MODAL_RIG_PRESETS
 
@@ -402,7 +407,7 @@ class ModalRig:
                 f"unknown modal rig preset {name!r}; available: {', '.join(MODAL_RIG_PRESETS)}"
             )
         preset = MODAL_RIG_PRESETS[name]
-        model = preset.model(ratio)
+        model = preset.model(ratio) if model is None else model
         low, high = amplitude_range_mm or preset.amplitude_range_mm[mode - 1]
         if not (0 < low < high and math.isfinite(high)) or levels < 1:
             raise ValueError(f"need levels ≥ 1 and 0 < low < high, got {levels}, {(low, high)}")
