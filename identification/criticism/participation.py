@@ -72,6 +72,7 @@ from identification.criticism.mode_refit import (
 __all__ = [
     "ALLOWANCE",
     "EXCHANGE_LEVEL",
+    "PARTICIPATION",
     "ROUTES",
     "ModeParticipation",
     "ParticipationCurve",
@@ -81,6 +82,8 @@ __all__ = [
     "participation_profiles",
 ]
 
+#: What placed a mode, in the words and the JSON (:attr:`RefitProfile.method`).
+PARTICIPATION = "participation"
 #: Route → (harmonic ``k``, ratios ``ω₂/ω₁`` tried).
 ROUTES: dict[str, tuple[int, np.ndarray]] = {
     JOINT_ROUTE: (1, np.round(np.arange(0.8, 1.25 + 1e-9, 0.005), 4)),
@@ -264,21 +267,18 @@ def _exchange_columns(curve: ParticipationCurve, omega_ref: float, harmonic: int
     return curve.amplitude_m[:, None] ** 2
 
 
-def _location_columns(
+def _fundamental_columns(
     curve: ParticipationCurve, omega_ref: float, harmonic: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The columns that place the mode (module notes): at the fundamental ``a`` times
-    a constant, the stiffness change and the damping force, all over the detuning; at
-    ``2ω`` the exchange's and a linear mode's."""
+    """The columns that place a mode at the fundamental (module notes): ``a`` times a
+    constant, the stiffness change and the damping force, all over the detuning."""
     a = curve.amplitude_m
-    if harmonic == 1:
-        omega = 2 * np.pi * curve.frequency_hz
-        resonant = a[:, None] * np.column_stack([
-            np.ones(a.size), (omega**2 - omega_ref**2) / omega_ref**2,
-            1j * curve.damping_ratio * omega**2 / omega_ref**2,
-        ])  # fmt: skip
-        return resonant, np.zeros((a.size, 0))
-    return _with_exchange(curve, omega_ref, harmonic)
+    omega = 2 * np.pi * curve.frequency_hz
+    resonant = a[:, None] * np.column_stack([
+        np.ones(a.size), (omega**2 - omega_ref**2) / omega_ref**2,
+        1j * curve.damping_ratio * omega**2 / omega_ref**2,
+    ])  # fmt: skip
+    return resonant, np.zeros((a.size, 0))
 
 
 def _with_exchange(
@@ -316,11 +316,23 @@ class _Route:
         widen = 0.5 * CROSSING_BANDWIDTHS * 2 * self.zeta * self.first_hz
         at_hz = self.ratios * self.first_hz / self.harmonic
         self.crossed = (at_hz >= span.min() - widen) & (at_hz <= span.max() + widen)
+        self._residuals: dict[Columns, np.ndarray] = {}
+
+    @property
+    def location_columns(self) -> Columns:
+        """The columns that place the mode: the fundamental's, or at ``2ω`` the
+        exchange's beside a linear mode's."""
+        return _fundamental_columns if self.harmonic == 1 else _with_exchange
 
     def residuals(self, columns: Columns) -> np.ndarray:
         """``(R,)`` the residual sum of squares at each ratio of the fit of ``columns``
         (resonant ones over the detuning), each curve's mode where it fits best within
-        :data:`ALLOWANCE` of the ratio (inf where not tried)."""
+        :data:`ALLOWANCE` of the ratio (inf where not tried); each set fitted once."""
+        if columns not in self._residuals:
+            self._residuals[columns] = self._fit(columns)
+        return self._residuals[columns]
+
+    def _fit(self, columns: Columns) -> np.ndarray:
         k, omega_ref = self.harmonic, self.omega_ref
         total = np.zeros(self.ratios.size)
         for c in self.curves:
@@ -349,17 +361,16 @@ class _Route:
     @cached_property
     def profile(self) -> RefitProfile:
         """The χ² the resonance takes off a mode too far to resonate, at each ratio."""
-        k = self.harmonic
-        rss = self.residuals(_location_columns)
+        k, columns = self.harmonic, self.location_columns
+        rss = self.residuals(columns)
         far = sum(
-            _residual(np.column_stack(_location_columns(c, self.omega_ref, k)),
-                      c.harmonics_m[:, k - 1])
+            _residual(np.column_stack(columns(c, self.omega_ref, k)), c.harmonics_m[:, k - 1])
             for c in self.curves
-        )  # fmt: skip
-        variance = self.variance(_location_columns, float(np.min(rss)))
+        )
+        variance = self.variance(columns, float(np.min(rss)))
         gain = np.where(np.isfinite(rss), (far - rss) / variance, -np.inf)
         return RefitProfile(self.route, self.ratios, gain, np.zeros((self.ratios.size, 0)),
-                            self.first_hz, method="participation")  # fmt: skip
+                            self.first_hz, method=PARTICIPATION)  # fmt: skip
 
     def exchange(self) -> float:
         """At ``2ω`` the χ² the coupling's drive (:func:`_exchange_columns`) takes off a

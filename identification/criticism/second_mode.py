@@ -97,6 +97,7 @@ from identification.criticism.config import LINEAR_PAIR, SEPARATION
 from identification.criticism.directions import Direction, mean_prediction
 from identification.criticism.mode_refit import RefitProfile, refit_profiles
 from identification.criticism.participation import (
+    PARTICIPATION,
     ModeParticipation,
     ParticipationLocation,
     locate_by_participation,
@@ -506,7 +507,7 @@ class SecondMode:
         low, high = self.interval_hz
         by = (
             " as its participation at the sensors places it"
-            if self.located_by == (PARTICIPATION)
+            if self.located_by == PARTICIPATION
             else ""
         )
         return (
@@ -518,8 +519,6 @@ class SecondMode:
         return dataclasses.asdict(self) | {"where": list(self.where), "text": self.text}
 
 
-#: Where the records carry the other mode's coordinate: its participation places it.
-PARTICIPATION = "participation"
 #: A participation given, or a function giving it (called only where a mode is named:
 #: reading it from multi-point records costs an extraction).
 type Participation = ModeParticipation | Callable[[], ModeParticipation | None] | None
