@@ -23,6 +23,7 @@ from identification.criticism.participation import (
     locate_by_participation,
     locked_mode,
 )
+from identification.criticism.words import second_mode_words
 from identification.measurements.backbone import BackboneSet
 from pm_joint.cli import main
 from studies.second_mode import campaign, independent_campaign, second_mode_campaign
@@ -48,13 +49,21 @@ def test_the_coupling_names_the_independent_simulators_mode_at_1_2():
     """At 1:2 the second harmonic of the simulator's second coordinate grows ∝ a² through
     its detuning: the coupling's drive takes far more than its threshold off, and the
     one-mode model's criticism names the mode from it — placed within 5 % — where the
-    one-point screen names none (block 8 000 000: 0 of 16)."""
-    _, truth, participation = independent_campaign(1.92, SEED)
+    one-point screen names none (block 8 000 000: 0 of 16). Its ratio is to the first
+    mode as the holds measure it (the simulator's 1.92), and its words say what named it:
+    the exchange's χ² beyond the 99 % quantile of χ² with two degrees per curve, and the
+    measured coordinate first in "where it shows"."""
+    measured, model, truth, participation = campaign("independent 1:2", SEED)
     answer = locate_by_participation(participation)
     assert answer.exchanges, (answer.exchange, answer.exchange_threshold)
-    row = second_mode_campaign("independent 1:2", SEED)
-    assert row.named and row.named_by == "participation", row.why
-    assert abs(row.named_hz - truth) <= 0.05 * truth
+    crit = criticize(model, measured, participation=participation)
+    mode = crit.second_mode
+    assert mode.named and mode.named_by == "participation", mode.why
+    assert abs(mode.frequency_hz - truth) <= 0.05 * truth
+    assert abs(mode.ratio / 1.92 - 1) <= 0.05, mode.ratio
+    assert mode.where[0].startswith("measured at the sensors: the second mode's harmonic 2")
+    quantile = chi2.ppf(0.99, 2 * len(measured))
+    assert f"beyond χ² {quantile:.3g} at 1 %" in second_mode_words(crit)
 
 
 def test_a_mode_the_shaker_drives_at_2w_is_placed_but_not_named():

@@ -151,6 +151,9 @@ _ONE_SIDED = {JOINT: True, COUPLING: True, HARMONIC: False, SENSOR: False}
 CROSSING_BANDWIDTHS = 2.0
 #: Amplitude (relative to the lowest level) at which the joint counts as at rest.
 _AT_REST = 1e-3
+#: How near (relative) the screen's best column must lie to a mode its participation placed
+#: for the screen's words to describe that mode: the ±5 % a located frequency claims.
+PLACED_TOLERANCE = 0.05
 
 
 @dataclass(frozen=True, eq=False)
@@ -442,8 +445,9 @@ class SecondMode:
         Its frequency over the first mode's, and in Hz, where the two-mode refit locates it
         (:mod:`~identification.criticism.mode_refit`); NaN where it does not.
     first_frequency_hz
-        The first mode's frequency it is measured against (the base model's at the
-        lowest level).
+        The first mode's frequency its ratio is to: where located, the one its profile was
+        placed against (the holds' lowest level for the participation, the base model's at
+        the lowest level for the refit); else the base model's.
     share
         The energy share it carries at the top level (from the linearised fit).
     gain, threshold
@@ -466,9 +470,10 @@ class SecondMode:
         What placed the frequency: ``"participation"`` (the other mode's coordinate in
         multi-point records, :mod:`~identification.criticism.participation`), ``"refit"``
         (the two-mode refit of one response point's backbone); empty where not located.
-    named_by, exchange
+    named_by, exchange, exchange_threshold
         What named it (``"screen"``, ``"participation"``: the coupling's drive of the other
-        mode's coordinate at ``2ω``; empty: not named) and that drive's χ² (NaN: none).
+        mode's coordinate at ``2ω``; empty: not named), that drive's χ² and the χ² quantile
+        it must exceed (NaN: none).
     """
 
     named: bool
@@ -489,6 +494,7 @@ class SecondMode:
     located_by: str = ""
     named_by: str = ""
     exchange: float = float("nan")
+    exchange_threshold: float = float("nan")
 
     @property
     def text(self) -> str:
@@ -666,18 +672,20 @@ class _Search:
             )
         located = refit is not None and not location
         nan = float("nan")
+        # Located, the ratio is to the first frequency its profile was placed against (the
+        # participation's: the holds' lowest level; the refit's: the base model's).
+        first = refit.first_frequency_hz if located else modes.first_frequency_hz
         return SecondMode(
             named=not why,
             mechanism=modes.mechanisms[route] if refit is None else refit.route,
-            ratio=refit.frequency_hz / modes.first_frequency_hz if located else nan,
+            ratio=refit.frequency_hz / first if located else nan,
             frequency_hz=refit.frequency_hz if located else nan,
-            first_frequency_hz=modes.first_frequency_hz,
+            first_frequency_hz=first,
             share=self.share(route),
             gain=gain,
             threshold=threshold,
             catalogue_gain=catalogue,
-            where=(*self.measured_where(refit if located else None),
-                   *self.where(route, refit.frequency_hz if located else None)),
+            where=self.shown(route, refit if located else None),
             why=why,
             located=located,
             interval_hz=refit.interval_hz if located else (nan, nan),
@@ -686,7 +694,24 @@ class _Search:
             located_by=refit.method if located else "",
             named_by="" if why else (PARTICIPATION if by_participation else "screen"),
             exchange=float("nan") if answer is None else answer.exchange,
+            exchange_threshold=nan if answer is None else answer.exchange_threshold,
         )  # fmt: skip
+
+    def shown(self, route: int, placed: RefitProfile | None) -> tuple[str, ...]:
+        """Where the mode shows, in words. Placed by its participation, the measured
+        coordinate says it, and the screen's column (a linearised fit to the backbone's
+        residual) is described beside it only where it is the placed mode: at the same
+        harmonic (the fundamental, or 2ω) and within ``PLACED_TOLERANCE`` of its frequency;
+        else the screen's words would describe another mode (docs/criticism.md)."""
+        measured = self.measured_where(placed)
+        if not measured:
+            return self.where(route, None if placed is None else placed.frequency_hz)
+        screen_hz = self.modes.ratios[route] * self.modes.first_frequency_hz
+        placed_harmonic = 2 if placed.route == COUPLING else 1
+        same = self.modes.harmonic(route) == placed_harmonic and (
+            abs(screen_hz / placed.frequency_hz - 1) <= PLACED_TOLERANCE
+        )
+        return (*measured, *self.where(route, placed.frequency_hz)) if same else measured
 
     @cached_property
     def given(self) -> ModeParticipation | None:

@@ -13,6 +13,7 @@ import numpy as np
 from identification.criticism.adequacy import no_solution
 from identification.criticism.config import Verdict
 from identification.criticism.directions import mean_prediction
+from identification.criticism.participation import EXCHANGE_LEVEL, PARTICIPATION
 from identification.criticism.readings import CHANNEL_LABELS
 from identification.criticism.records import Candidate, rmse_pairs
 from identification.effects import CATALOGUE
@@ -78,11 +79,18 @@ def _verdict_words(crit: Criticism) -> str:
 def second_mode_words(crit: Criticism) -> str:
     """The second-mode finding in words: the mode, how it beats the catalogue, where it shows."""
     mode = crit.second_mode
-    return (
-        f"{mode.text} (Δχ² {mode.gain:.4g} against the catalogue's best {mode.catalogue_gain:.4g}"
-        f" and its calibrated threshold {mode.threshold:.3g}); where it shows: "
-        + "; ".join(mode.where)
-    )
+    if mode.named_by == PARTICIPATION:
+        level = f"{100 * EXCHANGE_LEVEL:g} %"
+        beyond = (
+            f"its drive of the second mode's coordinate at 2ω takes Δχ² {mode.exchange:.4g} off "
+            f"a linear mode's fit, beyond χ² {mode.exchange_threshold:.3g} at {level}"
+        )
+    else:
+        beyond = (
+            f"Δχ² {mode.gain:.4g} against the catalogue's best {mode.catalogue_gain:.4g} and its "
+            f"calibrated threshold {mode.threshold:.3g}"
+        )
+    return f"{mode.text} ({beyond}); where it shows: " + "; ".join(mode.where)
 
 
 def caveats(crit: Criticism) -> list[str]:
