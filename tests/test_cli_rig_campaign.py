@@ -113,15 +113,15 @@ def test_rig_campaign_through_every_stage(rig_campaign, tmp_path, capsys):
     argv += ["--surrogate", str(surrogate), "--out", str(posterior)]
     argv += ["--sampler", "demetropolisz"]
     # One short chain cannot converge: the posterior is written, the exit code says so.
-    assert main([*argv, "--draws", "400", "--tune", "400", "--chains", "1"]) == EXIT_NOT_CONVERGED
+    assert main([*argv, "--draws", "200", "--tune", "200", "--chains", "1"]) == EXIT_NOT_CONVERGED
     assert "NOT CONVERGED" in capsys.readouterr().err
     # the draws went to posterior.zarr as they were taken; --resume carries the run on
-    assert load_posterior(posterior.with_suffix(".zarr")).posterior.sizes["draw"] == 400
-    assert main([*argv, "--draws", "600", "--chains", "1"]) == 2  # never overwritten
-    resume = [*argv, "--draws", "600", "--chains", "1", "--resume"]
+    assert load_posterior(posterior.with_suffix(".zarr")).posterior.sizes["draw"] == 200
+    assert main([*argv, "--draws", "300", "--chains", "1"]) == 2  # never overwritten
+    resume = [*argv, "--draws", "300", "--chains", "1", "--resume"]
     assert main(resume) == EXIT_NOT_CONVERGED
     resumed = load_posterior(posterior).posterior["linear_stiffness"]
-    assert resumed.sizes == {"chain": 1, "draw": 600}
+    assert resumed.sizes == {"chain": 1, "draw": 300}
 
     # The hierarchical model on the same campaign: a likelihood per point, LOO, new assemblies.
     hierarchical = tmp_path / "hierarchical.nc"

@@ -10,6 +10,7 @@ answers the hold at the hold's frequency with its receptance.
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -318,11 +319,13 @@ def test_one_mode_reading_warns_once_of_a_second_mode_it_leaves_out(tmp_path):
 # --modes 1 is main's path, bit for bit
 
 
-def test_one_mode_backbones_are_main_bit_for_bit(two_mode_folder, tmp_path):
-    """``backbones --modes 1`` writes what main wrote before several modes were read, digit for
-    digit: tests/data/one_mode_backbones/ holds main's tables of a one-assembly trc-like rig
+def test_one_mode_backbones_are_mains_to_rounding(two_mode_folder, tmp_path):
+    """``backbones --modes 1`` writes what main wrote before several modes were read:
+    tests/data/one_mode_backbones/ holds main's tables of a one-assembly trc-like rig
     campaign (2 levels) and of the two-mode plate record (see its README for the commit);
-    only ``source``, the record's folder, is kept as the record's name."""
+    only ``source``, the record's folder, is kept as the record's name. The same columns,
+    rows and words; numbers equal to 1e-12 relative, as another processor's floating point
+    rounds the last digit otherwise (seen: 1e-15 on an AMD EPYC, equal on CI's)."""
     from pm_joint.pipeline import write_rig_campaign
 
     rig = tmp_path / "rig"
@@ -333,7 +336,10 @@ def test_one_mode_backbones_are_main_bit_for_bit(two_mode_folder, tmp_path):
             warnings.simplefilter("ignore")
             assert main(["backbones", str(folder), "--modes", "1", "--out", str(mine)]) == 0
         written = mine.read_text().replace(f",{folder}{os.sep}", ",")
-        assert written == (DATA / "one_mode_backbones" / f"{name}.csv").read_text(), name
+        expected = (DATA / "one_mode_backbones" / f"{name}.csv").read_text()
+        mine_frame, main_frame = (pd.read_csv(io.StringIO(t)) for t in (written, expected))
+        pd.testing.assert_frame_equal(mine_frame, main_frame, check_exact=False, rtol=1e-12,
+                                      atol=0, obj=name)  # fmt: skip
 
 
 def test_csv_with_several_response_columns(tmp_path):

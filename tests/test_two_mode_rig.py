@@ -5,8 +5,6 @@
 * the ground truth against the independent package (scipy's DOP853 on forces written
   without the library's kernels): the linear modes' frequency and damping from a
   small-amplitude ring-down, and one nonlinear amplitude of each mode's nonlinear mode;
-* one-mode presets write the same bytes as main's code (run from ``/work/main`` in a
-  subprocess);
 * acceptance (#26): from a two-mode PLL campaign without drift, every other lab artefact on,
   ``pm-joint backbones --modes 2`` gives the locked mode's backbone within 0.05 % frequency
   and 2 % damping of the truth's phase-resonance backbone, and the other mode's
@@ -16,12 +14,6 @@
 
 from __future__ import annotations
 
-import filecmp
-import json
-import os
-import subprocess
-import sys
-import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +34,6 @@ from independent.decays import (
 from independent.forces import CubicStiffness, Microslip
 from pm_joint.cli import main as cli
 
-MAIN = Path("/work/main")
 #: #26's acceptance: frequency, damping, the other mode's participation (relative).
 FREQUENCY_TOLERANCE, DAMPING_TOLERANCE, PARTICIPATION_TOLERANCE = 5e-4, 0.02, 0.05
 
@@ -170,39 +161,6 @@ def test_phase_resonance_of_the_truth_matches_an_independent_steady_state():
     assert abs(np.degrees(np.arctan2(bending[2], bending[1]))) < 0.3
     participation = 1e3 * np.hypot(torsion[3], torsion[4])
     assert participation == pytest.approx(truth.participation_mm[i, 1, 1], rel=0.01)
-
-
-# ------------------------------------------------------------- one-mode bytes unchanged
-
-_ONE_MODE_SCRIPT = textwrap.dedent(
-    """
-    import sys
-    from identification.rig import rig_for_preset
-    for name in ("trc-like", "lab-all"):
-        rig = rig_for_preset(name, levels=1, hold_s=0.6)
-        rig.write_campaign(sys.argv[1] + "/" + name, assemblies=1, runs=2, seed=3)
-    """
-)
-
-
-@pytest.mark.skipif(not (MAIN / "identification").is_dir(), reason="needs main's checkout")
-def test_one_mode_presets_write_what_main_writes(tmp_path):
-    for where, code in (("main", MAIN), ("branch", Path(__file__).parents[1])):
-        env = {**os.environ, "PYTHONPATH": str(code)}
-        subprocess.run([sys.executable, "-c", _ONE_MODE_SCRIPT, str(tmp_path / where)], env=env,
-                       check=True, cwd=code)  # fmt: skip
-    for name in ("trc-like", "lab-all"):
-        main_folder, branch_folder = tmp_path / "main" / name, tmp_path / "branch" / name
-        files = sorted(p.name for p in main_folder.iterdir())
-        assert files == sorted(p.name for p in branch_folder.iterdir())
-        for file in files:
-            if file == "ground_truth.json":  # the library versions may differ; the truth not
-                main_truth = json.loads((main_folder / file).read_text())
-                branch_truth = json.loads((branch_folder / file).read_text())
-                assert main_truth["records"] == branch_truth["records"]
-                assert main_truth["rig"] == branch_truth["rig"]
-            else:
-                assert filecmp.cmp(main_folder / file, branch_folder / file, shallow=False), file
 
 
 # ---------------------------------------------------------------------------- the CLI
