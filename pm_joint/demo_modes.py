@@ -4,8 +4,9 @@ Free decays of the two-mode rig preset (bending and torsion of the panel near 1:
 coupled through the joint and a quadratic modal coupling, every lab artefact), read
 mode by mode; ``identify --modes 2`` and today's one-mode identification from the same
 records; the two-mode model updated on both modes' backbones (population matching,
-:func:`pm_joint.modal_update.update_modes`); the one-mode model criticised on the
-one-mode backbones (what the second-mode rule answers is printed, not forced); and held-out
+:func:`pm_joint.modal_update.update_modes`); PLL holds of mode 1 at the 15 points read
+mode by mode, and a one-mode model of them criticised with the second mode's participation
+(what the second-mode rule answers is printed, not forced); and held-out
 decays (another campaign of the rig, other assemblies) predicted by both models: the NMTE
 of each and their ratio, the error falling when the second mode is added.
 """
@@ -41,7 +42,8 @@ class TwoModeSize:
 
     ``assemblies`` training decays (identification and updating), ``held_out`` decays of
     other assemblies (prediction), each ``decay_s`` long; the updating's ``draws`` and
-    ``tune`` per chain, ``chains``.
+    ``tune`` per chain, ``chains``; the criticism's PLL holds: ``hold_levels`` levels up
+    and down on each of ``assemblies`` assemblies.
     """
 
     assemblies: int
@@ -50,6 +52,7 @@ class TwoModeSize:
     draws: int
     tune: int
     chains: int
+    hold_levels: int
 
 
 #: ``full``: three training and three held-out decays of the rig's length, draws that leave the
@@ -58,8 +61,9 @@ class TwoModeSize:
 #: needs three curves).
 MODE_SIZES = {
     "full": TwoModeSize(assemblies=3, held_out=3, decay_s=3.0, draws=10_000, tune=3_000,
-                        chains=2),
-    "small": TwoModeSize(assemblies=3, held_out=1, decay_s=1.0, draws=300, tune=200, chains=2),
+                        chains=2, hold_levels=8),
+    "small": TwoModeSize(assemblies=3, held_out=1, decay_s=1.0, draws=300, tune=200, chains=2,
+                         hold_levels=6),
 }  # fmt: skip
 
 #: The rig preset of the case.
@@ -130,25 +134,7 @@ def run_two_modes(out: Path, size: str, stages) -> dict[str, dict]:
             stages.sections.append(section)
     print(f"[pm-joint demo] two-mode updating: {verdict['headline']}")
 
-    one_backbones = stages.run("one-mode backbones", pipeline.campaign_backbones, one_ws)
-    title = "Two modes: criticism of the one-mode model"
-    try:
-        crit = stages.run("criticism of the one-mode model", pipeline.criticize_campaign,
-                          one_ws, one.model, out / "criticism_one_mode",
-                          measured=one_backbones)  # fmt: skip
-    except ValueError as error:  # what happened is the finding: printed, not forced
-        answer = f"the criticism of the one-mode model stopped: {error}"
-        section = Section(title, answer)
-    else:
-        found = crit.second_mode
-        answer = (
-            f"the criticism of the one-mode model answers {crit.verdict!s}; second mode: "
-            f"{'named' if found.named else 'not named'} ({found.text})"
-        )
-        section = criticism_section(crit.to_dict(), out / "criticism_one_mode", out)
-        section.title, section.text = title, f"{answer}\n\n{section.text}"
-    print(f"[pm-joint demo] {answer}")
-    stages.sections.append(section)
+    stages.sections.append(_criticism_of_holds(out, cfg, stages))
 
     rows = stages.run("held-out predictions", _predictions, held, one.model, two.model, layout)
     one_mean = float(np.mean([r["one_mode_nmte_percent"] for r in rows]))
@@ -172,6 +158,48 @@ def run_two_modes(out: Path, size: str, stages) -> dict[str, dict]:
         )
     )
     return {"two-mode population matching": verdict}
+
+
+def _criticism_of_holds(out: Path, cfg: TwoModeSize, stages) -> Section:
+    """PLL holds of mode 1 at the panel's 15 points, read mode by mode (``backbones
+    --modes 2``), a one-mode model identified from them and criticised with the second
+    mode's participation (``pm-joint criticize backbones_holds.csv``): the section."""
+    holds = out / "holds"
+    rig = ModalRig.preset(PRESET, levels=cfg.hold_levels)
+    stages.run("PLL holds of mode 1", rig.write_campaign, holds, assemblies=cfg.assemblies,
+               seed=0)  # fmt: skip
+    table = out / "backbones_holds.csv"
+    stages.run("per-mode backbones of the holds", pipeline.campaign_modal_backbones,
+               Workspace(holds, backbones_csv=table), 2)  # fmt: skip
+    one = stages.run(
+        "identify the holds (one mode)", pipeline.identify_campaign,
+        Workspace(holds, backbones_csv=out / "backbones_holds_one_mode.csv"), PAPER_LIBRARY,
+        n_records=cfg.assemblies, out=out / "model_holds_one_mode.json",
+    )  # fmt: skip
+    title = "Two modes: criticism of the one-mode model"
+    try:
+        crit = stages.run("criticism of the one-mode model", pipeline.criticize_campaign,
+                          Workspace(table), one.model, out / "criticism_one_mode")  # fmt: skip
+    except ValueError as error:  # what happened is the finding: printed, not forced
+        answer = f"the criticism of the one-mode model stopped: {error}"
+        print(f"[pm-joint demo] {answer}")
+        return Section(title, answer)
+    found = crit.second_mode
+    answer = (
+        f"the criticism of the one-mode model answers {crit.verdict!s}; second mode: "
+        f"{'named' if found.named else 'not named'} ({found.text})"
+    )
+    print(f"[pm-joint demo] {answer}")
+    section = criticism_section(crit.to_dict(), out / "criticism_one_mode", out)
+    intro = (
+        f"PLL holds of mode 1 ({cfg.assemblies} assemblies, {cfg.hold_levels} levels up and "
+        "down) at the 15 panel points, read mode by mode (pm-joint backbones --modes 2: "
+        "backbones_holds.csv), give the second mode's coordinate at every hold. A one-mode "
+        f"model identified from the holds ({one.model.equation()}) is criticised against "
+        "them with that participation (pm-joint criticize backbones_holds.csv)."
+    )
+    section.title, section.text = title, f"{intro}\n\n{answer}\n\n{section.text}"
+    return section
 
 
 def _predictions(held: Path, one, two, layout: ColumnLayout) -> list[dict]:
