@@ -15,7 +15,14 @@ final term explained when it was added, and the stop.
     nice -n 10 python bench/criticism_loop.py --tune --seeds 1 --scenarios lab-iwan,...
     nice -n 10 python bench/criticism_loop.py --tune --first-seed 2000000 --seeds 1 ...
 
-Ends with one JSON line; writes ``bench/results/criticism_loop[_tune].json``.
+Scenarios ``independent-<joint>`` (``independent-iwan``, ``-clearance``, ``-contact``,
+``-power-law-damping``) take their campaigns from the independent simulator
+(:data:`independent.campaigns.OUT_OF_CATALOGUE_JOINTS`: its own harmonic balance and forces,
+3 assemblies at its 10 default levels, its default scatter and hold noise), started from
+the linear pair fitted to the backbones' frequency and damping, as the lab rows are.
+
+Ends with one JSON line; writes ``bench/results/criticism_loop[_independent][_tune]
+[_heldout].json``.
 """
 
 from __future__ import annotations
@@ -26,13 +33,18 @@ import time
 from pathlib import Path
 
 from identification.criticism.config import LINEAR_PAIR, STOP_SHARE
+from identification.criticism.criticism import Criticism, criticize
 from identification.criticism.ending import problems_of
 from identification.criticism.moves import run_rounds
+from identification.effects import LINEAR_STIFFNESS, VISCOUS_DAMPING
+from identification.fitting.fitter import Fitter
+from identification.model import JointModel
 from identification.rig.presets import (
     LAB_HIDDEN_SCENARIOS,
     LAB_OUT_OF_CATALOGUE_SCENARIOS,
     RIG_PRESETS,
 )
+from independent.campaigns import OUT_OF_CATALOGUE_JOINTS, phase_resonance_campaign
 from studies.hidden_effects import criticism_study
 
 #: Thresholds the tuning replays (a proposed candidate captures at least PARTLY = 0.5).
@@ -42,11 +54,32 @@ HELD_OUT_SEED = 1_000_000
 RESULTS = Path(__file__).parent / "results"
 
 
+#: Scenario names of the independent simulator's out-of-catalogue joints.
+INDEPENDENT = {f"independent-{name}": name for name in OUT_OF_CATALOGUE_JOINTS}
+#: Assemblies of an independent campaign (as the lab rows': 3).
+INDEPENDENT_ASSEMBLIES = 3
+
+
+def _start(scenario: str, seed: int) -> Criticism:
+    """The first criticism of ``scenario``'s campaign at ``seed``, from the linear start."""
+    if scenario not in INDEPENDENT:
+        return criticism_study(scenario, seed, start="linear", rounds=0).criticisms[0]
+    joint = OUT_OF_CATALOGUE_JOINTS[INDEPENDENT[scenario]]
+    measured = phase_resonance_campaign(joint, INDEPENDENT_ASSEMBLIES, seed)
+    omega0 = float(joint.omega0_rad_s)
+    linear = JointModel(
+        {LINEAR_STIFFNESS: omega0**2, VISCOUS_DAMPING: 2 * joint.damping_ratio * omega0},
+        name="linear",
+    )
+    # the user's first fit: frequency and damping of the backbones alone
+    start = Fitter.from_backbones(measured.without_harmonics()).fit(linear).model
+    return criticize(start, measured)
+
+
 def run(scenario: str, seed: int, rounds: int, min_share: float) -> dict:
     """One campaign through the loop from the linear start: every kept model's state."""
     began = time.perf_counter()
-    start = criticism_study(scenario, seed, start="linear", rounds=0).criticisms[0]
-    chain = run_rounds(start, rounds, min_share=min_share)
+    chain = run_rounds(_start(scenario, seed), rounds, min_share=min_share)
     steps = []
     for k, crit in enumerate(chain):
         action = crit.history[-1].action
@@ -67,12 +100,15 @@ def run(scenario: str, seed: int, rounds: int, min_share: float) -> dict:
             }
         )
     end = chain[-1].loop_end
+    outside = scenario in LAB_OUT_OF_CATALOGUE_SCENARIOS or scenario in INDEPENDENT
+    # an independent joint's catalogue part is the linear pair
+    preset = RIG_PRESETS.get(scenario)
     return {
         "scenario": scenario,
         "seed": seed,
-        "kind": "out of catalogue" if scenario in LAB_OUT_OF_CATALOGUE_SCENARIOS else "hidden",
-        "truth": list(RIG_PRESETS[scenario].model.effects),
-        "hidden": list(RIG_PRESETS[scenario].hidden_effects),
+        "kind": "out of catalogue" if outside else "hidden",
+        "truth": list(preset.model.effects) if preset else list(LINEAR_PAIR),
+        "hidden": list(preset.hidden_effects) if preset else [],
         "steps": steps,
         "loop_end": end.to_dict(),
         "seconds": time.perf_counter() - began,
@@ -99,11 +135,15 @@ def replay(row: dict, threshold: float) -> dict:
         "admissible": not final["problems"],
         "smallest_share": min(shares) if shares else None,
         "outcome": outcome,
-        "consistent": not (
-            (final["fires"]["catalogue"] or final["fires"]["reference"])
-            and final["verdict"] in ("nothing missing", "drift")
-        ),
+        "consistent": _consistent(final),
     }
+
+
+def _consistent(step: dict) -> bool:
+    """A step's verdict agrees with its calibrated test: where the test fires, never
+    "nothing missing" (or "drift")."""
+    fires = step["fires"]["catalogue"] or step["fires"]["reference"]
+    return not (fires and step["verdict"] in ("nothing missing", "drift"))
 
 
 def main() -> None:
@@ -169,12 +209,15 @@ def main() -> None:
             "seeds": [args.first_seed, args.first_seed + args.seeds - 1],
             "min_share": STOP_SHARE,
             "admissible": sum(e["admissible"] for e in ends),
+            "consistent": sum(_consistent(r["steps"][-1]) for r in rows),
             "below_share": sum(
                 e["smallest_share"] is not None and e["smallest_share"] < STOP_SHARE for e in ends
             ),
             "runs": len(ends),
         }
-    name = "criticism_loop" + ("_tune" if args.tune else "")
+    independent = all(s in INDEPENDENT for s in scenarios)
+    name = "criticism_loop" + ("_independent" if independent else "")
+    name += "_tune" if args.tune else ""
     name += "_heldout" if args.first_seed >= HELD_OUT_SEED else ""
     (RESULTS / f"{name}.json").write_text(json.dumps(out, indent=1, default=str))
     print(json.dumps({k: v for k, v in out.items() if k != "rows"}, default=str))
