@@ -44,7 +44,8 @@ def main() -> None:
     parser.add_argument("--cases", default=",".join(CASES))
     parser.add_argument("--first-seed", type=int, default=HELD_OUT_SEED)
     parser.add_argument("--seeds", type=int, default=1)
-    parser.add_argument("--rows", type=Path, default=None, help="JSON-lines file of the rows")
+    parser.add_argument("--rows", type=Path, default=None,
+                        help="JSON-lines rows file (summary: FILE.summary.json)")  # fmt: skip
     parser.add_argument("--stop-at", default=None, help="UTC HH:MM after which no row starts")
     parser.add_argument("--summary", action="store_true", help="count the rows file only")
     args = parser.parse_args()
@@ -82,7 +83,11 @@ def main() -> None:
         "one_mode_n": len(one_mode),
         "one_mode_cp95": list(clopper_pearson(falsely, len(one_mode))) if one_mode else None,
     }
-    (RESULTS / f"{name}.json").write_text(json.dumps(summary, indent=2) + "\n")
+    # A rows file of one's own gets its summary beside it, not the study's (which a
+    # partial run would overwrite).
+    own = args.rows is not None
+    where = rows_path.with_suffix(".summary.json") if own else RESULTS / f"{name}.json"
+    where.write_text(json.dumps(summary, indent=2) + "\n")
     print(json.dumps(summary))
 
 
