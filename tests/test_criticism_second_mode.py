@@ -258,17 +258,19 @@ def test_a_hidden_catalogue_effect_names_no_second_mode():
     assert row.passed
 
 
-def test_an_out_of_catalogue_joint_is_not_named_a_second_mode():
-    """One-mode data from the independent simulator (its 12-slider Iwan joint, tuning seed 1)
-    with the loop's first addition (ẋ|ẋ|, 93 % of the gain left on held-out seeds): the rest
-    took a joint-route column's gain beyond the catalogue's, but no frequency is located and
-    a free-form stiffness and damping gains far more beyond the column than the reference
-    test's threshold, so no second mode is named (block 3 000 000 of bench/criticism_loop.py
-    had named one on 5 of 5 such campaigns). Beside it ``lab-second-mode`` (a mode the
-    column takes all of the free-form gain of) stays named:
+@pytest.mark.parametrize("seed", [1, 10])
+def test_an_out_of_catalogue_joint_is_not_named_a_second_mode(seed):
+    """One-mode data from the independent simulator (its 12-slider Iwan joint, tuning seeds
+    1 and 10) with the loop's first addition (ẋ|ẋ|, 93 % of the gain left on held-out
+    seeds): the rest took a joint-route column's gain beyond the catalogue's (at seed 10
+    the two-mode refit placed it near 94 Hz), but a free-form stiffness and damping gains
+    far more beyond the column than the reference test's threshold, so no second mode is
+    named (block 3 000 000 of bench/criticism_loop.py had named one on 5 of 5 such
+    campaigns). Beside it ``lab-second-mode`` (a mode the column takes all of the
+    free-form gain of) stays named:
     :func:`test_lab_second_mode_is_explained_by_a_second_mode`."""
     joint = OUT_OF_CATALOGUE_JOINTS["iwan"]
-    measured = phase_resonance_campaign(joint, 3, 1)
+    measured = phase_resonance_campaign(joint, 3, seed)
     omega0 = float(joint.omega0_rad_s)
     model = JointModel({LINEAR_STIFFNESS: omega0**2, VISCOUS_DAMPING: 0.006 * omega0,
                         "quadratic_damping": 7.0})  # fmt: skip

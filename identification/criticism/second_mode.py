@@ -370,8 +370,10 @@ class _Search:
                 f"catalogue's best ({catalogue:.4g}) by {SEPARATION:g}"
             )
         located = refit is not None and not location
-        if not why and not located and not by_participation:
-            why = self.unplaced(gain)
+        measured = located and refit.method == PARTICIPATION
+        if not why and not by_participation and not measured:
+            why = self.unmeasured(gain, located)
+            located = located and not why  # a mode not named states no frequency
         nan = float("nan")
         # Located, the ratio is to the first frequency its profile was placed against (the
         # participation's: the holds' lowest level; the refit's: the base model's).
@@ -398,17 +400,21 @@ class _Search:
             exchange_threshold=nan if answer is None else answer.exchange_threshold,
         )  # fmt: skip
 
-    def unplaced(self, gain: float) -> str:
-        """Why a mode the screen names but nothing places is not named (empty: it is).
+    def unmeasured(self, gain: float, located: bool) -> str:
+        """Why a mode the screen names, with no participation measured to place it, is not
+        named (empty: it is).
 
-        Unplaced, the screen's best column is one more amplitude-dependent stiffness and
-        damping, and joint physics outside the catalogue bends a backbone so too (an Iwan
-        joint's rest after ẋ|ẋ| took a joint-route column's gain). Such a mode is named only
-        where the decision fires and what the free-form reference gains beyond the column is
-        within the reference test's calibrated threshold: the column is all that is missing.
+        From one response point the screen's best column is one more amplitude-dependent
+        stiffness and damping, and joint physics outside the catalogue bends a backbone so
+        too: an Iwan joint's rest after ẋ|ẋ| took a joint-route column's gain, and the
+        two-mode refit placed a mode near 1:1 for it on some campaigns. Such a mode is
+        named only where what the free-form reference gains beyond the column is within the
+        reference test's calibrated threshold (the column is all that is missing), and,
+        where nothing locates it, the decision fires.
         """
         decision = self.decision
-        if not (decision.fires["catalogue"] or decision.fires["reference"]):
+        fires = decision.fires["catalogue"] or decision.fires["reference"]
+        if not located and not fires:
             return (
                 "its frequency is not located and the decision does not fire: an unplaced mode "
                 "is not told from the model's own misfit"
@@ -416,8 +422,9 @@ class _Search:
         rest = float(decision.observed.reference[0]) - gain
         limit = float(decision.calibration.reference_threshold)
         if rest > limit:
+            where = "placed by the refit alone" if located else "not located"
             return (
-                f"its frequency is not located, and a free-form stiffness and damping gain "
+                f"its frequency is {where}, and a free-form stiffness and damping gain "
                 f"Δχ² {rest:.4g} beyond it (more than the reference test's threshold "
                 f"{limit:.3g}): not told from joint physics outside the catalogue"
             )
