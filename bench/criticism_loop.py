@@ -22,7 +22,7 @@ Scenarios ``independent-<joint>`` (``independent-iwan``, ``-clearance``, ``-cont
 the linear pair fitted to the backbones' frequency and damping, as the lab rows are.
 
 Ends with one JSON line; writes ``bench/results/criticism_loop[_independent][_tune]
-[_heldout].json``.
+[_heldout].json``, or ``ROWS.summary.json`` beside a ``--rows`` file.
 """
 
 from __future__ import annotations
@@ -153,7 +153,9 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=1, help="seeds per scenario")
     parser.add_argument("--first-seed", type=int, default=0, help="first seed")
     parser.add_argument("--rounds", type=int, default=3, help="most effects added")
-    parser.add_argument("--rows", type=Path, help="append rows here (JSON lines), reuse them")
+    parser.add_argument(
+        "--rows", type=Path, help="append rows here (JSON lines), reuse them; FILE.summary.json"
+    )
     args = parser.parse_args()
     if not args.tune and args.first_seed < HELD_OUT_SEED:
         parser.error(f"a reported figure comes from held-out seeds (≥ {HELD_OUT_SEED})")
@@ -219,7 +221,10 @@ def main() -> None:
     name = "criticism_loop" + ("_independent" if independent else "")
     name += "_tune" if args.tune else ""
     name += "_heldout" if args.first_seed >= HELD_OUT_SEED else ""
-    (RESULTS / f"{name}.json").write_text(json.dumps(out, indent=1, default=str))
+    # A rows file of one's own gets its summary beside it (a block's run would otherwise
+    # overwrite another block's).
+    where = args.rows.with_suffix(".summary.json") if args.rows else RESULTS / f"{name}.json"
+    where.write_text(json.dumps(out, indent=1, default=str))
     print(json.dumps({k: v for k, v in out.items() if k != "rows"}, default=str))
 
 

@@ -15,9 +15,11 @@ import numpy as np
 import pytest
 from independent_sim import free_decay
 
+from identification.criticism.config import STOP_SHARE, Verdict
 from identification.criticism.criticism import criticize
 from identification.criticism.moves import run_rounds
 from identification.effects import LINEAR_STIFFNESS, VISCOUS_DAMPING
+from identification.fitting.fitter import Fitter
 from identification.measurements.columns import ColumnRecord
 from identification.measurements.extraction import extract_backbone
 from identification.model import JointModel
@@ -27,8 +29,8 @@ from identification.rig import (
     LAB_OUT_OF_CATALOGUE_SCENARIOS,
     RIG_PRESETS,
 )
-from independent import JointSpec, phase_resonance_campaign
-from independent.forces import Clearance
+from independent import phase_resonance_campaign
+from independent.campaigns import OUT_OF_CATALOGUE_JOINTS
 from studies import (
     HELD_OUT_SEED,
     QUIET_VERDICTS,
@@ -36,6 +38,7 @@ from studies import (
     NullOutcome,
     OutsideOutcome,
     criticism_study,
+    held_out_block,
     held_out_seeds,
 )
 
@@ -116,26 +119,38 @@ def test_out_of_catalogue_joints_are_never_explained_by_the_catalogue(scenario):
     assert all(not c.problems for crit in result.criticisms for c in crit.missing())
 
 
-def test_an_independent_clearance_joint_is_never_explained_by_the_catalogue():
+@pytest.mark.parametrize("joint", sorted(OUT_OF_CATALOGUE_JOINTS))
+def test_independent_out_of_catalogue_joints_end_the_loop_as_stated(joint):
     """Out of the catalogue, from the independent simulator (``independent``: its own
-    phase-resonance balance, no library kernel): a symmetric clearance of ±0.3 mm closing
-    on a spring of 15 % of the stiffness at 101 Hz, 3 assemblies at 10 levels over
-    0.05–2 mm, criticised from the linear-viscous model through the loop (3 rounds).
-    Pass rule: no round says "explained", and where the final calibrated test fires
-    (p ≤ α) the final verdict is not one that proposes nothing ("nothing missing",
-    "drift"). A clearance is no catalogue term: its dead zone and the kink where it
-    closes are shapes no catalogue stiffness takes."""
-    f0_hz, zeta = 101.0, 0.003
-    k0 = (2 * np.pi * f0_hz) ** 2
-    joint = JointSpec(f0_hz, zeta, (Clearance(3e-4, 0.15 * k0),))
-    measured = phase_resonance_campaign(joint, 3, SEED)
-    base = JointModel({LINEAR_STIFFNESS: k0, VISCOUS_DAMPING: 2 * zeta * np.sqrt(k0)})
-    chain = run_rounds(criticize(base, measured), 3)
+    phase-resonance balance and forces, no library kernel): each joint of
+    ``OUT_OF_CATALOGUE_JOINTS`` (a 12-slider Iwan joint, a ±0.3 mm clearance, a preloaded
+    contact, damping ∝ |v|^1.5), 3 assemblies at 10 levels over 0.05–2 mm, from the
+    linear-viscous model fitted to them through the loop (3 rounds). Pass rule (the loop
+    bench's, docs/criticism.md "On the independent simulator"): no round says
+    "explained"; the final model is admissible; every final term explained at least
+    ``STOP_SHARE`` of the gain left when it came in; where the final calibrated test fires,
+    the final verdict is not one that proposes nothing; and no second mode is named for
+    one-mode physics. Seed: the first of held-out block 5 (the bench's block after the
+    second-mode rule's last change; on the CI studies' seed 1 000 000 this test found the
+    refit placing a mode for the Iwan joint, which changed the rule, so that seed no longer
+    holds this claim out)."""
+    spec = OUT_OF_CATALOGUE_JOINTS[joint]
+    measured = phase_resonance_campaign(spec, 3, held_out_block(5))
+    omega0 = float(spec.omega0_rad_s)
+    linear = JointModel(
+        {LINEAR_STIFFNESS: omega0**2, VISCOUS_DAMPING: 2 * spec.damping_ratio * omega0}
+    )
+    start = Fitter.from_backbones(measured.without_harmonics()).fit(linear).model
+    chain = run_rounds(criticize(start, measured), 3)
     verdicts = [c.verdict for c in chain]
-    assert "explained" not in verdicts, [c.summary() for c in chain]
+    assert Verdict.EXPLAINED not in verdicts, [c.summary() for c in chain]
+    end = chain[-1].loop_end
+    assert end.admissible, end
+    assert end.smallest_share is None or end.smallest_share >= STOP_SHARE, end
     final = chain[-1]
-    if final.p_value <= final.alpha:
+    if final.fires["catalogue"] or final.fires["reference"]:
         assert final.verdict not in QUIET_VERDICTS, final.summary()
+    assert final.verdict != Verdict.SECOND_MODE, final.summary()
 
 
 @pytest.mark.slow
