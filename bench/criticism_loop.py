@@ -36,15 +36,13 @@ from identification.criticism.config import LINEAR_PAIR, STOP_SHARE
 from identification.criticism.criticism import Criticism, criticize
 from identification.criticism.ending import problems_of
 from identification.criticism.moves import run_rounds
-from identification.effects import LINEAR_STIFFNESS, VISCOUS_DAMPING
-from identification.fitting.fitter import Fitter
-from identification.model import JointModel
 from identification.rig.presets import (
     LAB_HIDDEN_SCENARIOS,
     LAB_OUT_OF_CATALOGUE_SCENARIOS,
     RIG_PRESETS,
 )
-from independent.campaigns import OUT_OF_CATALOGUE_JOINTS, phase_resonance_campaign
+from independent.campaigns import OUT_OF_CATALOGUE_JOINTS
+from studies.campaigns import independent_out_of_catalogue
 from studies.hidden_effects import criticism_study
 
 #: Thresholds the tuning replays (a proposed candidate captures at least PARTLY = 0.5).
@@ -56,23 +54,13 @@ RESULTS = Path(__file__).parent / "results"
 
 #: Scenario names of the independent simulator's out-of-catalogue joints.
 INDEPENDENT = {f"independent-{name}": name for name in OUT_OF_CATALOGUE_JOINTS}
-#: Assemblies of an independent campaign (as the lab rows': 3).
-INDEPENDENT_ASSEMBLIES = 3
 
 
 def _start(scenario: str, seed: int) -> Criticism:
     """The first criticism of ``scenario``'s campaign at ``seed``, from the linear start."""
     if scenario not in INDEPENDENT:
         return criticism_study(scenario, seed, start="linear", rounds=0).criticisms[0]
-    joint = OUT_OF_CATALOGUE_JOINTS[INDEPENDENT[scenario]]
-    measured = phase_resonance_campaign(joint, INDEPENDENT_ASSEMBLIES, seed)
-    omega0 = float(joint.omega0_rad_s)
-    linear = JointModel(
-        {LINEAR_STIFFNESS: omega0**2, VISCOUS_DAMPING: 2 * joint.damping_ratio * omega0},
-        name="linear",
-    )
-    # the user's first fit: frequency and damping of the backbones alone
-    start = Fitter.from_backbones(measured.without_harmonics()).fit(linear).model
+    measured, start = independent_out_of_catalogue(INDEPENDENT[scenario], seed)
     return criticize(start, measured)
 
 

@@ -25,17 +25,21 @@ from identification.analytical.harmonic import backbone as harmonic_backbone
 from identification.analytical.pll import pll_backbones
 from identification.effects import LINEAR_STIFFNESS, VISCOUS_DAMPING
 from identification.effects.microslip import EFFECT as MICROSLIP
+from identification.fitting.fitter import Fitter
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.extraction import extract_backbones
 from identification.measurements.records import Record
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS, rig_for_preset
+from independent.campaigns import OUT_OF_CATALOGUE_JOINTS, phase_resonance_campaign
 
 __all__ = [
     "NULL_CONDITIONS",
     "RIG_LEVEL_CHOICES",
     "draw_lab_campaign",
     "draw_rig_campaign",
+    "first_fit",
+    "independent_out_of_catalogue",
     "lab_conditions",
     "pll_campaign",
     "rig_campaign",
@@ -361,3 +365,25 @@ def pll_campaign(
         )
         for i, ok in enumerate(locked)
     )
+
+
+def first_fit(model: JointModel, measured: BackboneSet) -> JointModel:
+    """The user's first fit: ``model``'s coefficients fitted to the frequency and damping of
+    the backbones alone (the start a study criticises)."""
+    return Fitter.from_backbones(measured.without_harmonics()).fit(model).model
+
+
+def independent_out_of_catalogue(
+    joint: str, seed: int, n_curves: int = 3
+) -> tuple[BackboneSet, JointModel]:
+    """A campaign of the independent simulator's out-of-catalogue ``joint``
+    (:data:`independent.campaigns.OUT_OF_CATALOGUE_JOINTS`: its own balance and forces, its
+    default levels, scatter and hold noise) and the linear-viscous pair fitted to it."""
+    spec = OUT_OF_CATALOGUE_JOINTS[joint]
+    measured = phase_resonance_campaign(spec, n_curves, seed)
+    omega0 = float(spec.omega0_rad_s)
+    linear = JointModel(
+        {LINEAR_STIFFNESS: omega0**2, VISCOUS_DAMPING: 2 * spec.damping_ratio * omega0},
+        name="linear",
+    )
+    return measured, first_fit(linear, measured)

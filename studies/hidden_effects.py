@@ -20,14 +20,13 @@ import numpy as np
 from identification.criticism.criticism import Criticism, criticize
 from identification.criticism.moves import run_rounds
 from identification.effects import CATALOGUE, LINEAR_STIFFNESS, VISCOUS_DAMPING
-from identification.fitting.fitter import Fitter
 from identification.fitting.least_squares import FitResult
 from identification.measurements.backbone import BackboneSet
 from identification.measurements.records import Record
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS
 from identification.rig.presets import LAB_OUT_OF_CATALOGUE_SCENARIOS
-from studies.campaigns import rig_campaign
+from studies.campaigns import first_fit, rig_campaign
 from studies.driver import is_discovery
 from studies.outcomes import HiddenOutcome, NullOutcome, OutsideOutcome
 from studies.rows import EndState
@@ -428,8 +427,7 @@ def _start_model(
         return identify(list(records)[:3], POLYNOMIAL_LIBRARY).model
     else:
         raise ValueError(f"start must be 'base', 'linear' or 'sindy', got {start!r}")
-    # the user's first fit: frequency and damping of the backbones alone
-    return Fitter.from_backbones(measured.without_harmonics()).fit(model).model
+    return first_fit(model, measured)
 
 
 def criticism_study(

@@ -52,13 +52,13 @@ from scipy import optimize, stats
 from identification.criticism.criticism import Criticism, criticize
 from identification.criticism.oracle import oracle
 from identification.effects import LINEAR_STIFFNESS, VISCOUS_DAMPING
-from identification.fitting.fitter import Fitter
 from identification.measurements.backbone import BackboneSet
 from identification.measurements.extraction import extract_backbones
 from identification.model import JointModel
 from identification.rig import RIG_PRESETS, rig_for_preset
 from identification.rig.presets import LAB_HIDDEN_SCENARIOS, lab_hidden_scenario
 from independent import CATALOGUE_FORCES, JointSpec, phase_resonance_campaign
+from studies.campaigns import first_fit
 from studies.driver import QUIET_VERDICTS
 from studies.rows import Row
 from studies.seeds import HELD_OUT_SEED
@@ -149,11 +149,7 @@ def lab_campaign(effect: str, size: float, seed: int) -> tuple[BackboneSet, Join
         name = f"Config{rig.config}_PRT_Assemb{a}"
         records.append(rig.simulate(drawn, gain, np.random.default_rng([seed, a, 1]), name))
     measured = extract_backbones(records)
-    return measured, _first_fit(measured, base)
-
-
-def _first_fit(measured: BackboneSet, base: JointModel) -> JointModel:
-    return Fitter.from_backbones(measured.without_harmonics()).fit(base).model
+    return measured, first_fit(base, measured)
 
 
 def independent_joint(model: JointModel) -> JointSpec:
@@ -174,7 +170,7 @@ def independent_campaign(effect: str, size: float, seed: int) -> tuple[BackboneS
     default population scatter and hold noise), and the start fitted to it."""
     truth, base = scaled_truth(effect, size)
     measured = phase_resonance_campaign(independent_joint(truth), ASSEMBLIES, seed)
-    return measured, _first_fit(measured, base)
+    return measured, first_fit(base, measured)
 
 
 #: The data sources: ``(effect, size, seed) -> (measured backbones, start model)``.

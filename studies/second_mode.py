@@ -37,7 +37,6 @@ from identification.criticism.config import Verdict
 from identification.criticism.criticism import criticize
 from identification.criticism.participation import ModeParticipation, ParticipationCurve
 from identification.criticism.second_mode import Participation
-from identification.fitting.fitter import Fitter
 from identification.measurements.backbone import Backbone, BackboneSet
 from identification.measurements.extraction import extract_backbones
 from identification.measurements.modal_backbones import extract_modal_backbones
@@ -55,7 +54,7 @@ from independent.decays import ModalSystem, PotentialTerm
 from independent.forces import CubicStiffness
 from independent.modal_resonance import modal_phase_resonance
 from studies.binomial import clopper_pearson
-from studies.campaigns import rig_campaign
+from studies.campaigns import first_fit, rig_campaign
 from studies.rows import Row
 from studies.seeds import is_held_out
 
@@ -288,11 +287,6 @@ def independent_campaign(ratio: float, seed: int) -> tuple[BackboneSet, float, M
     return BackboneSet(curves), ratio * _INDEPENDENT_F1_HZ, participation
 
 
-def _start(model: JointModel, measured: BackboneSet) -> JointModel:
-    """The user's first fit: frequency and damping of the backbones alone."""
-    return Fitter.from_backbones(measured.without_harmonics()).fit(model).model
-
-
 def campaign(case: str, seed: int) -> tuple[BackboneSet, JointModel, float, Participation]:
     """The campaign of ``case`` at ``seed``: backbones, the one-mode start model fitted to
     them, the truth's second-mode frequency (NaN for one-mode data; the uncoupled mode's
@@ -302,24 +296,24 @@ def campaign(case: str, seed: int) -> tuple[BackboneSet, JointModel, float, Part
         rig, ratio = TWO_MODE_CASES[case]
         if rig == "two-mode":
             measured, truth, part = _two_mode_rig_campaign(ratio, seed)
-            return measured, _start(RIG_PRESETS[_TWO_MODE_START].model, measured), truth, part
+            return measured, first_fit(RIG_PRESETS[_TWO_MODE_START].model, measured), truth, part
         if rig == INDEPENDENT:
             measured, truth, part = independent_campaign(ratio, seed)
-            start = _start(RIG_PRESETS[_INDEPENDENT_START].base_model, measured)
+            start = first_fit(RIG_PRESETS[_INDEPENDENT_START].base_model, measured)
             return measured, start, truth, part
         preset = RIG_PRESETS[rig]
         mode = preset.lab["second_mode"]
         truth = mode.frequency_ratio * preset.model.linear_frequency_hz
     elif case in UNCOUPLED_CASES:
         measured, truth, part = _two_mode_rig_campaign(UNCOUPLED_CASES[case], seed, uncoupled=True)
-        return measured, _start(RIG_PRESETS[_TWO_MODE_START].model, measured), truth, part
+        return measured, first_fit(RIG_PRESETS[_TWO_MODE_START].model, measured), truth, part
     elif case in ONE_MODE_CASES:
         preset, truth = RIG_PRESETS[case], float("nan")
         rig = case
     else:
         raise ValueError(f"unknown case {case!r}; cases: {', '.join(CASES)}")
     _, measured = rig_campaign(rig, ASSEMBLIES, (seed,), levels=LEVELS)
-    return measured, _start(preset.base_model, measured), float(truth), None
+    return measured, first_fit(preset.base_model, measured), float(truth), None
 
 
 def second_mode_campaign(

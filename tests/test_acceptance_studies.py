@@ -19,17 +19,14 @@ from identification.criticism.config import STOP_SHARE, Verdict
 from identification.criticism.criticism import criticize
 from identification.criticism.moves import run_rounds
 from identification.effects import LINEAR_STIFFNESS, VISCOUS_DAMPING
-from identification.fitting.fitter import Fitter
 from identification.measurements.columns import ColumnRecord
 from identification.measurements.extraction import extract_backbone
-from identification.model import JointModel
 from identification.rig import (
     LAB_HIDDEN_SCENARIOS,
     LAB_NULL_SCENARIOS,
     LAB_OUT_OF_CATALOGUE_SCENARIOS,
     RIG_PRESETS,
 )
-from independent import phase_resonance_campaign
 from independent.campaigns import OUT_OF_CATALOGUE_JOINTS
 from studies import (
     HELD_OUT_SEED,
@@ -40,6 +37,7 @@ from studies import (
     criticism_study,
     held_out_block,
     held_out_seeds,
+    independent_out_of_catalogue,
 )
 
 #: Among the longest files of ``make test``: handed out first (tests/conftest.py).
@@ -134,13 +132,7 @@ def test_independent_out_of_catalogue_joints_end_the_loop_as_stated(joint):
     second-mode rule's last change; on the CI studies' seed 1 000 000 this test found the
     refit placing a mode for the Iwan joint, which changed the rule, so that seed no longer
     holds this claim out)."""
-    spec = OUT_OF_CATALOGUE_JOINTS[joint]
-    measured = phase_resonance_campaign(spec, 3, held_out_block(5))
-    omega0 = float(spec.omega0_rad_s)
-    linear = JointModel(
-        {LINEAR_STIFFNESS: omega0**2, VISCOUS_DAMPING: 2 * spec.damping_ratio * omega0}
-    )
-    start = Fitter.from_backbones(measured.without_harmonics()).fit(linear).model
+    measured, start = independent_out_of_catalogue(joint, held_out_block(5))
     chain = run_rounds(criticize(start, measured), 3)
     verdicts = [c.verdict for c in chain]
     assert Verdict.EXPLAINED not in verdicts, [c.summary() for c in chain]

@@ -108,6 +108,7 @@ from identification.criticism.mode_columns import (
 from identification.criticism.mode_refit import RefitProfile, refit_profiles
 from identification.criticism.participation import (
     PARTICIPATION,
+    ROUTES,
     ModeParticipation,
     ParticipationLocation,
     locate_by_participation,
@@ -413,8 +414,7 @@ class _Search:
         where nothing locates it, the decision fires.
         """
         decision = self.decision
-        fires = decision.fires["catalogue"] or decision.fires["reference"]
-        if not located and not fires:
+        if not located and not decision.significant:
             return (
                 "its frequency is not located and the decision does not fire: an unplaced mode "
                 "is not told from the model's own misfit"
@@ -440,8 +440,7 @@ class _Search:
         if not measured:
             return self.where(route, None if placed is None else placed.frequency_hz)
         screen_hz = self.modes.ratios[route] * self.modes.first_frequency_hz
-        placed_harmonic = 2 if placed.route == COUPLING else 1
-        same = self.modes.harmonic(route) == placed_harmonic and (
+        same = self.modes.harmonic(route) == ROUTES[placed.route][0] and (
             abs(screen_hz / placed.frequency_hz - 1) <= PLACED_TOLERANCE
         )
         return (*measured, *self.where(route, placed.frequency_hz)) if same else measured
@@ -469,7 +468,7 @@ class _Search:
         """The other mode's coordinate at the sensors, in words, where it placed the mode."""
         if placed is None or placed.method != PARTICIPATION:
             return ()
-        return (self.given.words(2 if placed.route == COUPLING else 1),)
+        return (self.given.words(ROUTES[placed.route][0]),)
 
     def coefficient(self, index: int) -> float:
         """Column ``index``'s coefficient per unit of its physical coefficient: from the
