@@ -333,6 +333,9 @@ def _cmd_train_surrogate(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import label_records, train_surrogate_stage
     from pm_joint.workspace import Workspace
 
+    if _is_modal_model(args.model):
+        _train_modal_surrogate(args)
+        return
     workspace = Workspace(args.dir, model=args.model, **_workspace_options(args))
     labels = label_records(workspace, **_identify_options(args))
     with _executor(args) as executor:
@@ -354,6 +357,43 @@ def _cmd_train_surrogate(args: argparse.Namespace) -> None:
                 "÷ assembly scatter (worst amplitude) "
                 + ("unknown" if scatter is None else f"{scatter:.3g}")
             )
+
+
+def _train_modal_surrogate(args: argparse.Namespace) -> None:
+    """``train-surrogate`` with a ModalModel: one surrogate per measured mode."""
+    from identification.multimode.model import ModalModel
+    from pm_joint.modal_surrogate import train_modal_surrogate
+
+    model = ModalModel.from_json(args.model)
+    measured = _mode_backbones(args, model)
+    surrogate = train_modal_surrogate(
+        model, measured, args.out, n_curves=args.curves, n_amplitudes=args.amplitudes,
+        max_epochs=args.epochs, seed=args.seed,
+    )  # fmt: skip
+    names = ", ".join(surrogate.parameter_names)
+    print(f"wrote {args.out}/modal_surrogate.json: modes {surrogate.modes}, parameters {names}")
+    for mode, runtime in surrogate.runtimes.items():
+        analytical = runtime.metadata["test"]["analytical"]
+        for channel in ("frequency_hz", "damping_ratio"):
+            ratios = analytical["ratios"][channel]
+            scatter = ratios.get("to_scatter_max")
+            print(
+                f"mode {mode} test (analytical), {channel}: ÷ linear baseline "
+                f"{ratios['to_linear']:.3g}, ÷ cubic {ratios['to_cubic']:.3g}, ÷ assembly "
+                "scatter (worst amplitude) " + ("unknown" if scatter is None else f"{scatter:.3g}")
+            )
+
+
+def _mode_backbones(args: argparse.Namespace, model: Any) -> dict:
+    """The campaign's per-mode backbones (the ``--modes N`` table, written first when
+    missing), by mode."""
+    from pm_joint.inference.modal import read_mode_backbones
+    from pm_joint.workspace import Workspace
+
+    workspace = Workspace(args.dir, **_workspace_options(args))
+    if not workspace.backbones_csv.is_file():
+        _extract_modes(workspace, model.n_modes, args)
+    return read_mode_backbones(workspace.backbones_csv)
 
 
 def _cmd_criticize(args: argparse.Namespace) -> None:
@@ -444,27 +484,31 @@ def _is_modal_model(source: str) -> bool:
 def _update_modes(args: argparse.Namespace) -> int:
     """``update`` with a ModalModel: every mode's backbones (the ``--modes N`` table)."""
     from identification.multimode.model import ModalModel
-    from pm_joint.inference.modal import MODAL_FORWARD, read_mode_backbones
+    from pm_joint.inference.modal import MODAL_FORWARD, MODAL_SURROGATE_FORWARD
     from pm_joint.modal_update import mode_report, update_modes
-    from pm_joint.workspace import Workspace
+    from surrogates.modal import ModalSurrogate
 
-    if args.surrogate or args.forward not in (None, "harmonic"):
+    if args.forward == "pll" or (args.forward == "surrogate" and not args.surrogate):
         raise ValueError(
             f"{args.model} is a ModalModel: it updates through its N-mode harmonic balance "
-            "graph (--forward harmonic, the default), not a surrogate or the PLL"
+            "graph (--forward harmonic, the default) or, with --surrogate DIR, through the "
+            "N-mode surrogate train-surrogate wrote for it; not the PLL"
         )
+    if args.surrogate and args.forward == "harmonic":
+        raise ValueError("--forward harmonic and --surrogate: give one forward model")
     model = ModalModel.from_json(args.model)
-    workspace = Workspace(args.dir, **_workspace_options(args))
-    csv = workspace.backbones_csv
-    if not csv.is_file():
-        _extract_modes(workspace, model.n_modes, args)
-    measured = read_mode_backbones(csv)
-    trace = _trace_folder(args, MODAL_FORWARD)
+    surrogate = ModalSurrogate.load(args.surrogate) if args.surrogate else None
+    measured = _mode_backbones(args, model)
+    forward = MODAL_FORWARD if surrogate is None else MODAL_SURROGATE_FORWARD
+    trace = _trace_folder(args, forward)
     idata = update_modes(
         model, measured, args.out, population=args.population, sampler=args.sampler,
         draws=args.draws, tune=args.tune, chains=args.chains, seed=args.seed, trace=trace,
-        resume=args.resume,
+        resume=args.resume, surrogate=surrogate,
     )  # fmt: skip
+    if "outside_surrogate_box" in idata.attrs:
+        share = idata.attrs["outside_surrogate_box"]
+        print(f"draws outside the surrogate's training box: {100 * share:.1f} %")
     print(f"wrote {args.out} (modes {', '.join(map(str, sorted(measured)))} of {args.model})")
     print(f"sampler: {idata.attrs['sampler']} ({idata.attrs['sampler_reason']})")
     if args.report:
@@ -622,7 +666,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("train-surrogate", help="dataset, training and ONNX export of a surrogate")
     p.add_argument("dir", help=f"{records}: the measured curves")
-    p.add_argument("--model", required=True, help="model JSON file")
+    p.add_argument("--model", required=True, help="model JSON file; a ModalModel JSON "
+                   "(identify --modes N) gets one surrogate per measured mode")  # fmt: skip
     p.add_argument("--out", required=True, help="surrogate folder")
     p.add_argument("--curves", type=int, default=500, help="training curves (default 500)")
     p.add_argument("--epochs", type=int, help="epochs per stage (default: the paper-sized run)")
@@ -687,7 +732,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "JSON (identify --modes N) is updated on each mode's backbones")  # fmt: skip
     p.add_argument("--forward", choices=FORWARD_MODELS,
                    help=f"forward model (default: {forward_help()})")  # fmt: skip
-    p.add_argument("--surrogate", help="surrogate folder (for --forward surrogate)")
+    p.add_argument("--surrogate", help="surrogate folder (for --forward surrogate; with a "
+                   "ModalModel, the N-mode surrogate train-surrogate wrote for it)")  # fmt: skip
     p.add_argument("--out", required=True, help="posterior netCDF file")
     # The defaults' words come from the table the updating reads (SAMPLER_DEFAULTS).
     p.add_argument("--sampler", choices=SAMPLERS, help=f"default: {default_help('sampler')}")

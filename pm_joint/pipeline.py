@@ -497,7 +497,7 @@ def train_surrogate_stage(
     """
     # torch only here: `pm-joint update` and the reports never load it.
     from surrogates.export import export_surrogate
-    from surrogates.train import TrainingConfig, train_on_dataset
+    from surrogates.train import stage_config, train_on_dataset
 
     out = Path(out)
     model, measured = workspace.model, workspace.backbones
@@ -521,12 +521,7 @@ def train_surrogate_stage(
         )  # fmt: skip
     dataset = dataset.with_splits(0.1, 0.1, seed=seed, hold_out_measured=hold_out_measured)
     dataset.save(out / "dataset.npz")
-    config = config or TrainingConfig(head_degree=3, damping_target="decay_rate")
-    config = dataclasses.replace(config, seed=seed, progress=progress)
-    if max_epochs is not None:
-        config = dataclasses.replace(
-            config, max_epochs=max_epochs, patience=max_epochs, finetune_epochs=max_epochs // 2
-        )
+    config = stage_config(config, seed=seed, progress=progress, max_epochs=max_epochs)
     by_channel = dict(zip(GRID_CHANNELS[:3], scatter.T, strict=True))
     surrogate = train_on_dataset(dataset, config, scatter=by_channel)
     export_surrogate(surrogate, out)

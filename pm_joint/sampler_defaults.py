@@ -82,6 +82,15 @@ SAMPLER_DEFAULTS = {
         reason="a parameter vector per assembly: gradient samplers only, nutpie's NUTS "
         "the fastest",
     ),
+    ("matching", "modal_surrogate"): SamplerDefault(
+        "metropolis", draws=30_000, tune=3_000,
+        reason="the paper's sampler on its surrogate, as for one mode",
+    ),
+    ("hierarchical", "modal_surrogate"): SamplerDefault(
+        "nutpie", draws=1_000, tune=1_000,
+        reason="a parameter vector per assembly: gradient samplers only, nutpie's NUTS "
+        "through each mode's network",
+    ),
 }  # fmt: skip
 
 

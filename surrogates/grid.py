@@ -45,6 +45,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 from itertools import pairwise
+from typing import Any
 
 import numpy as np
 
@@ -63,19 +64,46 @@ __all__ = [
     "curves_covering",
     "geometric_grid",
     "grid_backbones",
+    "grid_counts",
     "measured_grid",
     "measured_on_grid",
+    "passed_curves",
     "point_base_acceleration",
 ]
 
 #: Channels of an amplitude-grid backbone, in the order :func:`grid_backbones` returns them.
-GRID_CHANNELS = REPRESENTATION_CHANNELS["amplitude_grid"]
+GRID_CHANNELS = REPRESENTATION_CHANNELS["amplitude_grid"][:4]
 #: Relative step above a grid amplitude at which the slope of ``A(a)`` is taken.
 _NUDGE = 1e-6
 #: Why an entry is masked; code ``i + 1`` in :func:`grid_backbones`' reasons (0: a backbone).
 MASK_REASONS = ("no_solution", "no_power_input", "passed")
 #: Measured curves that must cover a grid amplitude: fewer give no assembly scatter there.
 MIN_CURVES = 3
+
+
+def passed_curves(reasons: np.ndarray) -> np.ndarray:
+    """``(n,)`` True for the sets (rows of mask reasons ``(n, A)``) with an amplitude a test
+    stepping its level up has passed."""
+    return np.any(reasons == 1 + MASK_REASONS.index("passed"), axis=1)
+
+
+def grid_counts(reasons: np.ndarray) -> dict[str, Any]:
+    """A grid dataset's counts (its provenance's ``counts``) from the mask reasons ``(n, A)``
+    of its sets, every set kept (code ``1 +`` the index in :data:`MASK_REASONS`, 0: a point)."""
+    n, masked = len(reasons), reasons != 0
+    return {
+        "requested": n,
+        "generated": n,
+        "kept": n,
+        "failed": 0,
+        "non_monotone": int(passed_curves(reasons).sum()),
+        "measured": 0,
+        "curves_with_mask": int(masked.any(axis=1).sum()),
+        "curves_without_backbone": int(masked.all(axis=1).sum()),
+        "masked_entries": {
+            reason: int(np.sum(reasons == 1 + i)) for i, reason in enumerate(MASK_REASONS)
+        },
+    }
 
 
 def geometric_grid(amplitude_range_m: tuple[float, float], n_amplitudes: int) -> np.ndarray:
@@ -228,9 +256,16 @@ def point_base_acceleration(curve: Backbone, level_gain: float | None = None) ->
 
 
 def measured_on_grid(
-    curve: Backbone, amplitudes_m: np.ndarray, level_gain: float | None = None
+    curve: Backbone,
+    amplitudes_m: np.ndarray,
+    level_gain: float | None = None,
+    *,
+    drive: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A measured curve on the amplitude grid, where it covers it.
+
+    ``drive`` False leaves the base acceleration out (NaN): for curves of free decays, or of
+    a mode read through the modal filter, whose points need not have a positive power input.
 
     Returns
     -------
@@ -246,7 +281,12 @@ def measured_on_grid(
     if amplitude.size < 2:
         raise ValueError("it needs two distinct amplitudes")
     counts = np.bincount(inverse)
-    points = (curve.frequency_hz, curve.damping_ratio, point_base_acceleration(curve, level_gain))
+    acceleration = (
+        point_base_acceleration(curve, level_gain)
+        if drive
+        else np.full(curve.amplitude_m.shape, np.nan)
+    )
+    points = (curve.frequency_hz, curve.damping_ratio, acceleration)
     averaged = [np.bincount(inverse, weights=p) / counts for p in points]
     grid = np.asarray(amplitudes_m, dtype=float)
     observed = (grid >= amplitude[0] * (1 - 1e-12)) & (grid <= amplitude[-1] * (1 + 1e-12))
@@ -255,28 +295,33 @@ def measured_on_grid(
 
 
 def _placed(
-    curves: Iterable[Backbone], amplitudes_m: np.ndarray, level_gain: float | None
-) -> list[tuple[np.ndarray, np.ndarray]]:
+    curves: Iterable[Backbone], amplitudes_m: np.ndarray, level_gain: float | None,
+    drive: bool = True,
+) -> list[tuple[np.ndarray, np.ndarray]]:  # fmt: skip
     """:func:`measured_on_grid` of every curve it can place (two distinct amplitudes, a
     positive power input at every point); the others are left out."""
     placed = []
     for curve in curves:
         try:
-            placed.append(measured_on_grid(curve, amplitudes_m, level_gain))
+            placed.append(measured_on_grid(curve, amplitudes_m, level_gain, drive=drive))
         except ValueError:
             continue
     return placed
 
 
 def curves_covering(
-    curves: BackboneSet, amplitudes_m: np.ndarray, *, level_gain: float | None = None
+    curves: BackboneSet,
+    amplitudes_m: np.ndarray,
+    *,
+    level_gain: float | None = None,
+    drive: bool = True,
 ) -> np.ndarray:
     """``(n_amplitudes,)`` int: how many measured curves cover each amplitude.
 
     A curve covers the amplitudes between its smallest and largest one; curves
     :func:`assembly_scatter` leaves out are not counted.
     """
-    placed = _placed(curves, np.asarray(amplitudes_m, dtype=float), level_gain)
+    placed = _placed(curves, np.asarray(amplitudes_m, dtype=float), level_gain, drive)
     if not placed:
         return np.zeros(len(amplitudes_m), dtype=int)
     return np.sum([observed for _, observed in placed], axis=0).astype(int)
@@ -288,17 +333,20 @@ def assembly_scatter(
     *,
     level_gain: float | None = None,
     min_curves: int = MIN_CURVES,
+    drive: bool = True,
 ) -> np.ndarray:
     """Assembly-to-assembly standard deviation of measured curves per grid amplitude.
 
     ``(n_amplitudes, 3)`` for frequency (Hz), damping ratio and base acceleration
     (m/s²), the sample standard deviation over the curves that cover each
     amplitude; NaN where fewer than ``min_curves`` do. Curves that cannot be put
-    on the grid (fewer than two amplitudes, no positive power input) are left out.
+    on the grid (fewer than two amplitudes, no positive power input) are left out;
+    ``drive`` False: the base acceleration is NaN and not asked for
+    (:func:`measured_on_grid`).
     """
     if min_curves < 2:
         raise ValueError(f"min_curves must be ≥ 2 for a standard deviation, got {min_curves}")
-    placed = _placed(curves, amplitudes_m, level_gain)
+    placed = _placed(curves, amplitudes_m, level_gain, drive)
     if not placed:
         return np.full((len(amplitudes_m), 3), np.nan)
     stacked = np.array([np.where(observed[:, None], v, np.nan) for v, observed in placed])
@@ -366,6 +414,7 @@ def measured_grid(
     *,
     min_curves: int = MIN_CURVES,
     level_gain: float | None = None,
+    drive: bool = True,
 ) -> MeasuredGrid:
     """The amplitude grid of a campaign: where at least ``min_curves`` measured curves cover.
 
@@ -375,7 +424,8 @@ def measured_grid(
     default of 3; ``min_curves=1`` gives the union of overlapping curves' ranges,
     the grid before issue #15). Where the covered amplitudes fall apart into
     several intervals (curves that do not overlap), the widest on a logarithmic
-    scale is taken.
+    scale is taken. ``drive`` False places curves without asking for a positive power
+    input (:func:`measured_on_grid`).
 
     Raises
     ------
@@ -387,7 +437,7 @@ def measured_grid(
     extents = [
         curve.amplitude_range_m
         for curve in curves
-        if _placed([curve], np.array(curve.amplitude_range_m), level_gain)
+        if _placed([curve], np.array(curve.amplitude_range_m), level_gain, drive)
     ]
     if not extents:
         raise ValueError("no measured curve can be placed on an amplitude grid")
@@ -408,7 +458,7 @@ def measured_grid(
     grid = geometric_grid((ends[starts[widest]], ends[stops[widest]]), n_amplitudes)
     return MeasuredGrid(
         amplitudes_m=grid,
-        curves_covering=curves_covering(curves, grid, level_gain=level_gain),
+        curves_covering=curves_covering(curves, grid, level_gain=level_gain, drive=drive),
         min_curves=min_curves,
         measured_range_m=(float(low.min()), float(high.max())),
         n_curves=len(extents),

@@ -18,7 +18,9 @@ A backbone is sampled on one of two grids (:attr:`SurrogateSpec.representation`)
     probability that the model has a backbone point there that a test stepping
     its level up reaches (0 where there is no periodic solution, no positive
     power input, or the level needed is below one already passed). Value
-    channels are meaningful only where ``has_backbone`` ≥ 0.5.
+    channels are meaningful only where ``has_backbone`` ≥ 0.5. An N-mode model's
+    surrogate (one per mode, :mod:`surrogates.modal`) adds
+    ``other_modes_energy_share``, the share of the hold's energy in the other modes.
 ``"excitation_levels"``
     Fixed base-acceleration levels (m/s²), as a test steps its shaker: the
     response amplitude is an output. Undefined for a parameter vector that
@@ -51,6 +53,7 @@ __all__ = [
     "FORMAT_VERSION",
     "MASK_CHANNEL",
     "MODEL_FILE",
+    "OTHER_MODES_CHANNEL",
     "REPRESENTATION_CHANNELS",
     "SIDECAR_FILE",
     "SurrogateRuntime",
@@ -69,14 +72,21 @@ CHANNEL_UNITS = {
     "damping_ratio": "1",
     "base_acceleration_m_s2": "m/s^2",
     "has_backbone": "1",
+    "other_modes_energy_share": "1",
 }
 #: The mask channel of the amplitude grid: probability that a backbone point exists.
 MASK_CHANNEL = "has_backbone"
+#: An N-mode surrogate's channel: the share of the linear modal energy in the modes not
+#: locked (:mod:`surrogates.dataset.modal`).
+OTHER_MODES_CHANNEL = "other_modes_energy_share"
 #: Channels each representation allows (the grid's own quantity is not a channel).
 REPRESENTATION_CHANNELS = {
     "excitation_levels": ("amplitude_m", "frequency_hz", "damping_ratio"),
-    "amplitude_grid": ("frequency_hz", "damping_ratio", "base_acceleration_m_s2", MASK_CHANNEL),
-}
+    "amplitude_grid": (
+        "frequency_hz", "damping_ratio", "base_acceleration_m_s2", MASK_CHANNEL,
+        OTHER_MODES_CHANNEL,
+    ),
+}  # fmt: skip
 
 Extrapolate = Literal["raise", "flag", "allow"]
 _EXTRAPOLATE = ("raise", "flag", "allow")

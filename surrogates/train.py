@@ -54,7 +54,7 @@ import math
 import time
 import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -81,6 +81,7 @@ __all__ = [
     "Surrogate",
     "TrainingConfig",
     "output_scaling",
+    "stage_config",
     "train_on_dataset",
     "train_surrogate",
 ]
@@ -429,6 +430,21 @@ def train_surrogate(
     )
     surrogate.train_seconds = time.perf_counter() - start
     return surrogate
+
+
+def stage_config(
+    config: TrainingConfig | None, *, seed: int, progress: bool, max_epochs: int | None
+) -> TrainingConfig:
+    """The training of ``pm-joint train-surrogate``: ``config`` or the stage's default (the
+    paper's network on the residual of a cubic head, the damping learnt as a decay rate), with
+    the run's seed and progress, and ``max_epochs`` capping every stage."""
+    config = config or TrainingConfig(head_degree=3, damping_target="decay_rate")
+    config = replace(config, seed=seed, progress=progress)
+    if max_epochs is not None:
+        config = replace(
+            config, max_epochs=max_epochs, patience=max_epochs, finetune_epochs=max_epochs // 2
+        )
+    return config
 
 
 def train_on_dataset(

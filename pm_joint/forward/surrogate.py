@@ -12,6 +12,7 @@ rather than a NaN there.
 
 from __future__ import annotations
 
+import itertools
 import os
 import weakref
 from collections.abc import Callable
@@ -236,6 +237,10 @@ def _network_graph(runtime: SurrogateRuntime, theta: pt.TensorVariable) -> pt.Te
 
 #: The network's weights as shared variables, one set per runtime (see _shared_weights).
 _WEIGHTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+#: Numbers the runtimes' weight sets: the numba backend writes a compiled function's inputs
+#: by their names, so two surrogates in one model (an N-mode model's, one per mode) must not
+#: share them.
+_RUNTIME_NUMBERS = itertools.count()
 
 
 def _shared_weights(runtime: SurrogateRuntime, initializers: dict) -> dict[str, Any]:
@@ -248,9 +253,10 @@ def _shared_weights(runtime: SurrogateRuntime, initializers: dict) -> dict[str, 
     network they both evaluate into one.
     """
     if runtime not in _WEIGHTS:
+        number = next(_RUNTIME_NUMBERS)
         _WEIGHTS[runtime] = {
             name: pytensor.shared(
-                value.astype(np.float64), name=f"surrogate.{name}", shape=value.shape
+                value.astype(np.float64), name=f"surrogate{number}.{name}", shape=value.shape
             )
             for name, value in initializers.items()
             if np.issubdtype(value.dtype, np.floating) and value.ndim > 0

@@ -8,7 +8,11 @@ phase-resonant backbone from the N-mode equations held at it
 parameter vector θ: as the differentiable graph for the hierarchical model and gradient
 samplers (:class:`~pm_joint.forward.modal_harmonic.ModalHarmonicGraph`), as the recorded
 program that compiles in seconds for population matching's Metropolis-type samplers
-(:class:`~pm_joint.forward.modal_op.ModalHarmonicOp`, the same values).
+(:class:`~pm_joint.forward.modal_op.ModalHarmonicOp`, the same values) — or, given an
+N-mode surrogate (:class:`surrogates.modal.ModalSurrogate`, ``pm-joint train-surrogate``
+with a ModalModel), each mode's trained network: its ONNX Op (population matching) or its
+network as a pytensor graph (the hierarchical model, gradient samplers), as the one-mode
+updating runs on a surrogate.
 
 :func:`build_modal_model`
     Population matching: uniform priors on θ and, per mode m, the
@@ -35,10 +39,11 @@ hardly sees; they stay at the template's values).
 from __future__ import annotations
 
 import json
+import math
 import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -48,22 +53,30 @@ import pytensor.tensor as pt
 from identification.measurements.backbone import BackboneSet
 from identification.multimode.model import ModalModel
 from pm_joint.distributions import BackboneAmplitude, BackboneDensity, amplitude_levels
-from pm_joint.forward import BACKBONE_COLUMNS, forward_model, modal_backbone_graph
+from pm_joint.forward import BACKBONE_COLUMNS, SurrogateGraph, forward_model, modal_backbone_graph
 from pm_joint.forward.modal_harmonic import ModalHarmonicGraph, template_values
 from pm_joint.forward.modal_op import ModalHarmonicOp, Unrecordable
 from pm_joint.inference.models import (
     HIERARCHICAL,
     POPULATION_MATCHING,
+    POPULATION_SUFFIX,
+    amplitudes_within_surrogate,
     check_varying,
     curve_points,
     observe_channel,
-    population_theta,
+    population_draws,
+    surrogate_bounds,
     uniform_priors,
 )
+from surrogates.modal import ModalSurrogate
+from surrogates.runtime import SurrogateRuntime
 
 __all__ = [
     "MODAL_FORWARD",
+    "MODAL_SURROGATE_FORWARD",
     "build_modal_model",
+    "draws_outside_box",
+    "hierarchical_scales",
     "modal_bounds",
     "modal_hierarchical_model",
     "modal_update_names",
@@ -73,6 +86,8 @@ __all__ = [
 
 #: The forward model of an N-mode updating (its name in the sampler table and the metadata).
 MODAL_FORWARD = "modal_harmonic"
+#: The forward model of an N-mode updating on its surrogate.
+MODAL_SURROGATE_FORWARD = "modal_surrogate"
 #: Relative half-width of the default prior box of a mode's linear frequency: a few
 #: assembly scatters, well inside the gap to an internal resonance (1:2 at 3 % on the rig).
 FREQUENCY_SPREAD = 0.02
@@ -164,13 +179,24 @@ def modal_bounds(
     return bounds
 
 
-def _checked_modes(model: ModalModel, measured: Mapping[int, BackboneSet]) -> list[int]:
+def _checked_modes(
+    model: ModalModel, measured: Mapping[int, BackboneSet], surrogate: ModalSurrogate | None
+) -> list[int]:
+    """The measured modes, checked against the model and the surrogate (if any)."""
     modes = sorted(measured)
     if not modes:
         raise ValueError("no measured backbones of any mode")
     wrong = [m for m in modes if not 1 <= m <= model.n_modes]
     if wrong:
         raise ValueError(f"backbones of mode(s) {wrong}, but the model has {model.n_modes} modes")
+    if surrogate is not None:
+        surrogate.check_model(model.content_sha256)
+        untrained = [m for m in modes if m not in surrogate.runtimes]
+        if untrained:
+            raise ValueError(
+                f"the surrogate {surrogate.source} has no network of mode(s) {untrained}, "
+                f"which the campaign measured; it has modes {surrogate.modes}"
+            )
     return modes
 
 
@@ -185,6 +211,7 @@ def build_modal_model(
     densities: Mapping[int, BackboneDensity] | None = None,
     n_grid: int = 41,
     native_graph: bool = False,
+    surrogate: ModalSurrogate | None = None,
 ) -> pm.Model:
     """Population matching of an N-mode model, one backbone-amplitude potential per mode.
 
@@ -212,6 +239,11 @@ def build_modal_model(
         sampler); else as :class:`~pm_joint.forward.modal_op.ModalHarmonicOp`, the same
         values without a gradient, compiled in seconds instead of the graph's minutes (the
         graph still where the model has an element the Op cannot record).
+    surrogate
+        Each mode's backbone from its surrogate instead (trained for ``model``): the
+        priors are its training box (or ``bounds``, inside it), each mode's levels those
+        its grid covers (:func:`~pm_joint.inference.models.amplitudes_within_surrogate`),
+        and its mask channel the probability that a backbone point exists, as for one mode.
 
     Returns
     -------
@@ -220,8 +252,10 @@ def build_modal_model(
         and the attributes ``forward_ops`` and ``backbone_densities`` (by mode),
         ``population_model`` and ``modal_model``.
     """
-    modes = _checked_modes(model, measured)
+    modes = _checked_modes(model, measured, surrogate)
     names = list(names or modal_update_names(model))
+    if surrogate is not None:
+        bounds = surrogate_bounds(surrogate.runtimes[modes[0]], names, bounds)
     bounds = dict(bounds or modal_bounds(model, names, measured))
     missing = [n for n in names if n not in bounds]
     if missing:
@@ -231,9 +265,19 @@ def build_modal_model(
     ops = {}
     for m in modes:
         if m not in densities:
-            densities[m] = BackboneDensity.fit(
-                measured[m], amplitude_levels(measured[m]), channels=channels, family=family
+            levels = (
+                amplitude_levels(measured[m])
+                if surrogate is None
+                else amplitudes_within_surrogate(measured[m], surrogate.runtimes[m])
             )
+            densities[m] = BackboneDensity.fit(
+                measured[m], levels, channels=channels, family=family
+            )
+        if surrogate is not None:
+            ops[m] = forward_model(
+                "surrogate", None, names, surrogate=surrogate.runtimes[m], native_graph=native_graph
+            )
+            continue
         low, high = measured[m].common_range()
         levels = densities[m].amplitudes_m
         grid = np.union1d(np.linspace(0.5 * low, 1.2 * high, n_grid), levels)
@@ -246,9 +290,12 @@ def build_modal_model(
     with pm.Model() as pm_model:
         theta = uniform_priors(bounds)
         for m in modes:
+            # A surrogate says where the model has no backbone: a probability, as for one mode.
+            mask = ops[m].has_backbone(theta) if surrogate is not None else None
             BackboneAmplitude(
-                f"backbone_mode{m}", ops[m](theta), observed=measured[m], density=densities[m]
-            )
+                f"backbone_mode{m}", ops[m](theta), observed=measured[m], density=densities[m],
+                has_backbone=mask,
+            )  # fmt: skip
     pm_model.forward_ops = ops
     pm_model.backbone_densities = densities
     pm_model.population_model = POPULATION_MATCHING
@@ -324,12 +371,17 @@ class _ModePoints(NamedTuple):
 
     @classmethod
     def read(
-        cls, measured: BackboneSet, mode: int, owner: np.ndarray, n_levels: int
+        cls,
+        measured: BackboneSet,
+        mode: int,
+        owner: np.ndarray,
+        n_levels: int,
+        within_m: tuple[float, float] = (0.0, np.inf),
     ) -> _ModePoints:
         """The curves of ``mode`` (their assemblies ``owner``) at ``n_levels`` amplitudes
-        spaced geometrically over the mode's measured range."""
-        low = min(b.amplitude_range_m[0] for b in measured)
-        high = max(b.amplitude_range_m[1] for b in measured)
+        spaced geometrically over the mode's measured range (its part ``within_m``)."""
+        low = max(min(b.amplitude_range_m[0] for b in measured), within_m[0])
+        high = min(max(b.amplitude_range_m[1] for b in measured), within_m[1])
         grid = np.geomspace(low, high, n_levels)
         curve, amplitude, values = curve_points(measured, grid)
         level = np.clip(np.searchsorted(grid, amplitude), 0, grid.size - 1)
@@ -342,12 +394,13 @@ def modal_hierarchical_model(
     names: Sequence[str] | None = None,
     *,
     n_levels: int = HIERARCHICAL_LEVELS,
-    location_scale: float = 0.5,
-    population_scale: float = 0.2,
+    location_scale: float | Sequence[float] | None = None,
+    population_scale: float | Sequence[float] | None = None,
     channels: Sequence[str] = ("frequency_hz", "damping_ratio"),
     heteroscedastic: bool = True,
     relative_noise: Sequence[str] = ("damping_ratio",),
     centred: bool | Sequence[bool] = True,
+    surrogate: ModalSurrogate | None = None,
 ) -> pm.Model:
     """Per-assembly parameters of an N-mode model from a population distribution.
 
@@ -362,13 +415,31 @@ def modal_hierarchical_model(
     the joint elements with first-order couplings, its own approximation (see
     :mod:`pm_joint.forward.modal_harmonic`). The data ``curve_index`` (assembly) and
     ``mode_index`` (from 0) say whose each point is.
+
+    The priors' scales are per parameter (:func:`hierarchical_scales`, by default): a
+    modal frequency is known to a few per cent, not the one-mode model's factor e^0.5,
+    and a sampler that starts a frequency 60 % off (nutpie's jitter of ±1 on η) lands
+    beyond an internal resonance, where the backbone folds or the network extrapolates:
+    chains that never meet (r̂ 3 on the demo case's decays). The population is sampled
+    in units of those scales (:func:`_scaled_population_theta`), so a start jittered by ±1
+    moves a frequency by its prior scale.
+
+    With ``surrogate`` each mode's graph is its surrogate's network in pytensor
+    (:class:`~pm_joint.forward.SurrogateGraph`, compiled in seconds where the N-mode
+    balance's loop takes minutes), linear in amplitude between its grid points, and the
+    mode's levels lie inside its grid. Its training box is not a prior bound here
+    (``θ = θ0 exp(η)``): :func:`draws_outside_box` counts the draws beyond it.
     """
-    modes = _checked_modes(model, measured)
+    modes = _checked_modes(model, measured, surrogate)
     names = list(names or modal_update_names(model))
     template = template_values(model)
     check_varying(template, names, channels)
     assemblies, owner = assembly_labels(measured)
-    parts = [_ModePoints.read(measured[m], m, owner[m], n_levels) for m in modes]
+    runtimes = surrogate.runtimes if surrogate is not None else {}
+    parts = [
+        _ModePoints.read(measured[m], m, owner[m], n_levels, _grid_range(runtimes.get(m)))
+        for m in modes
+    ]
     assembly = np.concatenate([p.assembly for p in parts])
     group = np.concatenate([np.full(p.amplitude.size, g) for g, p in enumerate(parts)])
     amplitude = np.concatenate([p.amplitude for p in parts])
@@ -382,13 +453,18 @@ def modal_hierarchical_model(
     coords = {"curve": assemblies, "parameter": names, "point": np.arange(amplitude.size),
               "group": [f"mode {m}" for m in modes]}  # fmt: skip
     with pm.Model(coords=coords) as pm_model:
-        theta = population_theta(theta0, names, location_scale, population_scale, centred)
+        location, population = hierarchical_scales(names)
+        if location_scale is not None:
+            location = np.broadcast_to(location_scale, len(names))
+        if population_scale is not None:
+            population = np.broadcast_to(population_scale, len(names))
+        theta = _scaled_population_theta(theta0, names, location, population, centred)
         predicted = {c: [] for c in channels}
         for part in parts:
             # Every assembly on the mode's levels, then each point picked from its own.
-            tensors = modal_backbone_graph(model, theta, names, part.grid, mode=part.mode)
+            backbone = _mode_graph(model, theta, names, part, runtimes.get(part.mode))
             for c in channels:
-                column = tensors.backbone[..., BACKBONE_COLUMNS.index(c)]
+                column = backbone[..., BACKBONE_COLUMNS.index(c)]
                 predicted[c].append(column[part.assembly, part.level])
         pm.Data("amplitude_m", amplitude, dims="point")
         pm.Data("curve_index", assembly, dims="point")
@@ -405,6 +481,91 @@ def modal_hierarchical_model(
     pm_model.centred = [n for n, c in zip(names, centred, strict=True) if c]
     pm_model.hierarchical_options = json.dumps(
         {"relative_noise": [c for c in channels if c in relative_noise], "truncation": None,
-         "centred": pm_model.centred, "modes": modes, "levels": n_levels}
+         "centred": pm_model.centred, "modes": modes, "levels": n_levels,
+         "forward": MODAL_FORWARD if surrogate is None else MODAL_SURROGATE_FORWARD}
     )  # fmt: skip
+    pm_model.surrogate = surrogate
     return pm_model
+
+
+def _scaled_population_theta(
+    theta0: np.ndarray,
+    names: Sequence[str],
+    location: np.ndarray,
+    population: np.ndarray,
+    centred: np.ndarray,
+) -> pt.TensorVariable:
+    """:func:`~pm_joint.inference.models.population_theta`'s population, sampled in units of
+    each parameter's prior scale: ``μ = s μ̃`` (``log_mean_std`` μ̃ standard normal),
+    ``σ = p σ̃`` (``log_spread_std`` σ̃ half-normal), ``η = s η̃`` with ``η̃`` drawn from
+    ``N(μ̃, (p/s) σ̃)`` by :func:`~pm_joint.inference.models.population_draws`; ``log_mean``,
+    ``log_spread``, ``theta`` and ``{name}_population`` are its deterministics. The same
+    distribution; a sampler's start jittered by ±1 in these units moves a frequency by its
+    prior scale, not by 60 %."""
+    mu_std = pm.Normal("log_mean_std", 0.0, 1.0, dims="parameter")
+    sigma_std = pm.HalfNormal("log_spread_std", 1.0, dims="parameter")
+    mu = pm.Deterministic("log_mean", location * mu_std, dims="parameter")
+    pm.Deterministic("log_spread", population * sigma_std, dims="parameter")
+    eta = location * population_draws(mu_std, population / location * sigma_std, centred, names)
+    theta = pm.Deterministic("theta", theta0 * pt.exp(eta), dims=("curve", "parameter"))
+    for j, name in enumerate(names):
+        pm.Deterministic(f"{name}{POPULATION_SUFFIX}", theta0[j] * pt.exp(mu[j]))
+    return theta
+
+
+def hierarchical_scales(names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Per parameter, the scale of its population log-location's prior and of its
+    log-spread's: a modal frequency :data:`FREQUENCY_SPREAD` and half that (assemblies
+    scatter a few tenths of a per cent), a damping ratio ``log`` :data:`DAMPING_FACTOR` and
+    0.2, a joint element :data:`ELEMENT_SPREAD` and 0.2 (the one-mode model's): the
+    prior box of population matching in log units."""
+    location, population = [], []
+    for name in names:
+        if name.endswith(".frequency_hz"):
+            location.append(FREQUENCY_SPREAD)
+            population.append(FREQUENCY_SPREAD / 2)
+        elif name.endswith(".damping_ratio"):
+            location.append(math.log(DAMPING_FACTOR))
+            population.append(0.2)
+        else:
+            location.append(ELEMENT_SPREAD)
+            population.append(0.2)
+    return np.array(location), np.array(population)
+
+
+def _grid_range(runtime: SurrogateRuntime | None) -> tuple[float, float]:
+    """The amplitudes (m) a mode's surrogate covers (all without one)."""
+    if runtime is None:
+        return 0.0, np.inf
+    return float(runtime.amplitudes_m[0]), float(runtime.amplitudes_m[-1])
+
+
+def _mode_graph(
+    model: ModalModel,
+    theta: pt.TensorVariable,
+    names: Sequence[str],
+    part: _ModePoints,
+    runtime: SurrogateRuntime | None,
+) -> pt.TensorVariable:
+    """``(assemblies, levels, 3)``: one mode's backbone of every assembly at its levels."""
+    if runtime is None:
+        return modal_backbone_graph(model, theta, names, part.grid, mode=part.mode).backbone
+    grid = runtime.amplitudes_m
+    # Linear in amplitude between the surrogate's grid points: a constant matrix.
+    weights = np.zeros((part.grid.size, grid.size))
+    for row, a in enumerate(part.grid):
+        right = int(np.clip(np.searchsorted(grid, a), 1, grid.size - 1))
+        share = (a - grid[right - 1]) / (grid[right] - grid[right - 1])
+        weights[row, right - 1], weights[row, right] = 1 - share, share
+    on_grid = SurrogateGraph(runtime, names)(theta)
+    return pt.tensordot(on_grid, weights, axes=[[1], [1]]).transpose(0, 2, 1)
+
+
+def draws_outside_box(idata: Any, surrogate: ModalSurrogate) -> float:
+    """Share of the hierarchical posterior's per-assembly draws outside the surrogate's
+    training box (where its network extrapolates)."""
+    theta = idata.posterior["theta"]
+    low = np.array([surrogate.bounds[n][0] for n in theta["parameter"].values])
+    high = np.array([surrogate.bounds[n][1] for n in theta["parameter"].values])
+    values = theta.values
+    return float(np.mean(np.any((values < low) | (values > high), axis=-1)))

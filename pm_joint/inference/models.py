@@ -51,6 +51,7 @@ __all__ = [
     "amplitudes_within_surrogate",
     "build_model",
     "hierarchical_model",
+    "surrogate_bounds",
     "uniform_priors",
 ]
 
@@ -151,7 +152,7 @@ def build_model(
                 raise ValueError("forward model 'surrogate' needs surrogate= (a runtime or folder)")
             runtime = SurrogateRuntime.load(surrogate)
         names = list(names or runtime.parameter_names)
-        bounds = _surrogate_bounds(runtime, names, bounds)
+        bounds = surrogate_bounds(runtime, names, bounds)
         op = forward_model("surrogate", model, names, surrogate=runtime, native_graph=native_graph)
     else:
         if model is None:
@@ -190,7 +191,7 @@ def build_model(
     return pm_model
 
 
-def _surrogate_bounds(
+def surrogate_bounds(
     runtime: SurrogateRuntime,
     names: Sequence[str],
     bounds: Mapping[str, tuple[float, float]] | None,

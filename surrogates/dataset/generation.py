@@ -45,10 +45,11 @@ from surrogates.dataset.container import (
 from surrogates.dataset.design import _box, nominal_levels, sample_parameters
 from surrogates.grid import (
     GRID_CHANNELS,
-    MASK_REASONS,
     GridEvaluation,
     geometric_grid,
     grid_backbones,
+    grid_counts,
+    passed_curves,
 )
 from surrogates.runtime import REPRESENTATION_CHANNELS, SurrogateSpec
 
@@ -254,7 +255,12 @@ def generate_dataset(
         raise ValueError(
             f"representation must be one of {list(REPRESENTATION_CHANNELS)}, got {representation!r}"
         )
-    grid_channels = REPRESENTATION_CHANNELS[representation]
+    # An N-mode surrogate's channel is not the one-mode balance's (surrogates.dataset.modal).
+    grid_channels = (
+        GRID_CHANNELS
+        if representation == "amplitude_grid"
+        else REPRESENTATION_CHANNELS[representation]
+    )
     if channels is None:
         on_levels = ("amplitude_m", "frequency_hz")
         channels = grid_channels if representation == "amplitude_grid" else on_levels
@@ -391,25 +397,11 @@ def _grid_dataset(
         tuple(names), np.array(provenance["bounds"]), channels=channels,
         amplitudes_m=how.amplitudes_m,
     )  # fmt: skip
-    passed = np.any(reasons == 1 + MASK_REASONS.index("passed"), axis=1)
-    masked = reasons != 0
     provenance.update(
         amplitudes_m=how.amplitudes_m.tolist(),
         evaluation={"refine": how.refine, "lead_in": how.lead_in,
                     "lead_in_points": how.lead_in_points},
-        counts={
-            "requested": len(parameters),
-            "generated": len(parameters),
-            "kept": len(parameters),
-            "failed": 0,
-            "non_monotone": int(passed.sum()),
-            "measured": 0,
-            "curves_with_mask": int(masked.any(axis=1).sum()),
-            "curves_without_backbone": int(masked.all(axis=1).sum()),
-            "masked_entries": {
-                reason: int(np.sum(reasons == 1 + i)) for i, reason in enumerate(MASK_REASONS)
-            },
-        },
+        counts=grid_counts(reasons),
     )  # fmt: skip
     columns = [GRID_CHANNELS.index(c) for c in channels]
     return BackboneDataset(
@@ -417,7 +409,7 @@ def _grid_dataset(
         Y=values[..., columns],
         spec=spec,
         origin=np.full(len(parameters), ANALYTICAL),
-        non_monotone=passed,
+        non_monotone=passed_curves(reasons),
         failed_parameters=np.empty((0, len(names))),
         failed_reasons=np.empty(0, dtype=str),
         provenance=provenance,
