@@ -25,6 +25,7 @@ import numpy as np
 import pytensor.tensor as pt
 import pytest
 from test_modal_update import (
+    N_ASSEMBLIES,
     TEMPLATE_OFFSET,
     _population_table,
     _truth,
@@ -90,15 +91,26 @@ def test_a_modes_dataset_is_the_closed_form_duffing_backbone(k3):
         assert counts["no_solution"] == int((~exists).sum())
 
 
-def test_the_hierarchical_graph_reads_a_modes_network_between_its_grid_points(tmp_path):
-    from pm_joint.forward import SurrogateOp
-    from pm_joint.inference.modal import _mode_graph, _ModePoints, read_mode_backbones
+@pytest.fixture(scope="module")
+def small_surrogate(tmp_path_factory):
+    """A quickly trained N-mode surrogate of the test population's model (its values are
+    not what these tests check) and the population's per-mode backbones."""
+    from pm_joint.inference.modal import read_mode_backbones
     from pm_joint.modal_surrogate import train_modal_surrogate
 
     measured = read_mode_backbones(_population_table())
+    folder = tmp_path_factory.mktemp("modal_surrogate")
     surrogate = train_modal_surrogate(
-        _truth(), measured, tmp_path / "s", n_curves=60, max_epochs=3, progress=False
+        _truth(), measured, folder, n_curves=60, max_epochs=3, progress=False
     )
+    return surrogate, measured
+
+
+def test_the_hierarchical_graph_reads_a_modes_network_between_its_grid_points(small_surrogate):
+    from pm_joint.forward import SurrogateOp
+    from pm_joint.inference.modal import _mode_graph, _ModePoints
+
+    surrogate, measured = small_surrogate
     runtime = surrogate.runtimes[2]
     grid = runtime.amplitudes_m
     owner = np.zeros(len(measured[2]), dtype=int)
@@ -112,6 +124,22 @@ def test_the_hierarchical_graph_reads_a_modes_network_between_its_grid_points(tm
         for column in (1, 2):
             expected = np.interp(part.grid, grid, on_grid[row, :, column])
             np.testing.assert_allclose(graph[row, :, column], expected, rtol=1e-5)
+
+
+def test_the_hierarchical_model_on_a_surrogate_walls_in_its_training_box(small_surrogate):
+    from pm_joint.inference.modal import WALL_WIDTH, modal_hierarchical_model
+
+    surrogate, measured = small_surrogate
+    pm_model = modal_hierarchical_model(_truth(), measured, n_levels=4, surrogate=surrogate)
+    names = list(pm_model.coords["parameter"])
+    wall = pm_model.compile_fn(pm_model["training_box_wall"], inputs=[pm_model["theta"]])
+    box = np.array([surrogate.bounds[n] for n in names])
+    inside = np.tile(box.mean(axis=1), (N_ASSEMBLIES, 1))
+    assert wall({"theta": inside}) == 0
+    # One assembly's first parameter 3 wall widths above the box: -(3²)/2.
+    beyond = inside.copy()
+    beyond[1, 0] = box[0, 1] + 3 * WALL_WIDTH * (box[0, 1] - box[0, 0])
+    np.testing.assert_allclose(wall({"theta": beyond}), -4.5)
 
 
 @pytest.mark.heavy

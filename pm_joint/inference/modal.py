@@ -427,8 +427,9 @@ def modal_hierarchical_model(
     With ``surrogate`` each mode's graph is its surrogate's network in pytensor
     (:class:`~pm_joint.forward.SurrogateGraph`, compiled in seconds where the N-mode
     balance's loop takes minutes), linear in amplitude between its grid points, and the
-    mode's levels lie inside its grid. Its training box is not a prior bound here
-    (``θ = θ0 exp(η)``): :func:`draws_outside_box` counts the draws beyond it.
+    mode's levels lie inside its grid. Its training box keeps every assembly's parameters
+    by a smooth wall (:func:`_training_box_wall`); :func:`draws_outside_box` counts the
+    draws beyond it.
     """
     modes = _checked_modes(model, measured, surrogate)
     names = list(names or modal_update_names(model))
@@ -459,6 +460,8 @@ def modal_hierarchical_model(
         if population_scale is not None:
             population = np.broadcast_to(population_scale, len(names))
         theta = _scaled_population_theta(theta0, names, location, population, centred)
+        if surrogate is not None:
+            _training_box_wall(theta, names, surrogate)
         predicted = {c: [] for c in channels}
         for part in parts:
             # Every assembly on the mode's levels, then each point picked from its own.
@@ -486,6 +489,26 @@ def modal_hierarchical_model(
     )  # fmt: skip
     pm_model.surrogate = surrogate
     return pm_model
+
+
+#: Width of the surrogate's training-box wall, as a share of each parameter's box.
+WALL_WIDTH = 0.01
+
+
+def _training_box_wall(
+    theta: pt.TensorVariable, names: Sequence[str], surrogate: ModalSurrogate
+) -> None:
+    """A potential that keeps every assembly's parameters in the surrogate's training box:
+    0 inside, ``−½ (d / w)²`` at a distance ``d`` beyond it (``w`` :data:`WALL_WIDTH` of the
+    box). A network's values beyond its box are extrapolation, not the model: without the
+    wall the demo case's chains took the joint element to a sixth of the template's, where
+    only the network's extrapolation fitted, and the N-mode balance does not. A smooth wall,
+    not a hard bound, so that NUTS's trajectories that touch it turn back rather than
+    diverge."""
+    box = np.array([surrogate.bounds[n] for n in names])
+    width = WALL_WIDTH * (box[:, 1] - box[:, 0])
+    beyond = pt.maximum(box[:, 0] - theta, 0) + pt.maximum(theta - box[:, 1], 0)
+    pm.Potential("training_box_wall", -0.5 * pt.sum((beyond / width) ** 2))
 
 
 def _scaled_population_theta(
