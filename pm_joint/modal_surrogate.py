@@ -17,22 +17,47 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from identification.measurements.backbone import BackboneSet
+from identification.multimode.model import FORMAT as MODAL_FORMAT
 from identification.multimode.model import ModalModel
 from pm_joint import plotting
+from pm_joint.forward.modal_harmonic import modal_backbone_numpy, template_values
 from pm_joint.inference.modal import modal_bounds, modal_update_names
-from surrogates.dataset.modal import generate_modal_dataset
+from surrogates.dataset.modal import ModeBackbones, ModeEvaluation, generate_modal_dataset
 from surrogates.grid import assembly_scatter, measured_grid
 from surrogates.modal import ModalSurrogate, mode_folder
 from surrogates.runtime import SurrogateRuntime
 
-__all__ = ["train_modal_surrogate"]
+__all__ = ["mode_evaluation", "train_modal_surrogate"]
+
+
+def mode_evaluation(
+    model: ModalModel, names: Sequence[str], amplitudes_m: np.ndarray, mode: int
+) -> ModeEvaluation:
+    """Mode ``mode``'s backbones of parameter sets on ``amplitudes_m``, from the N-mode
+    harmonic balance (:func:`~pm_joint.forward.modal_harmonic.modal_backbone_numpy`, many
+    sets at once): the hold's drive from the power balance ``ζ = Γ A / (2 ω² a)``, the
+    other modes' share from the balance's energy shares."""
+    participation = template_values(model)[f"mode{mode}.participation"]
+
+    def evaluate(parameters: np.ndarray) -> ModeBackbones:
+        out = modal_backbone_numpy(model, parameters, list(names), amplitudes_m, mode=mode)
+        omega = 2 * np.pi * out.frequency_hz
+        return ModeBackbones(
+            frequency_hz=out.frequency_hz,
+            damping_ratio=out.damping_ratio,
+            drive_m_s2=2 * omega**2 * amplitudes_m * out.damping_ratio / participation,
+            other_modes_energy_share=1 - np.asarray(out.energy_share)[..., mode - 1],
+            settled=np.asarray(out.converged, dtype=bool),
+        )
+
+    return evaluate
 
 
 def train_modal_surrogate(
@@ -87,8 +112,11 @@ def train_modal_surrogate(
         grid = measured_grid(measured[mode], n_amplitudes, drive=False)
         scatter = assembly_scatter(measured[mode], grid.amplitudes_m, drive=False)
         dataset = generate_modal_dataset(
-            model, names, box, grid.amplitudes_m, mode=mode, n=n_curves, seed=seed
-        )
+            mode_evaluation(model, names, grid.amplitudes_m, mode), names, box,
+            grid.amplitudes_m, n=n_curves, seed=seed,
+            provenance={"model": model.to_dict(), "model_format": MODAL_FORMAT, "mode": mode,
+                        "method": "modal_harmonic"},
+        )  # fmt: skip
         dataset = dataclasses.replace(
             dataset, provenance={**dataset.provenance, "grid": grid.to_dict()}
         ).with_splits(0.1, 0.1, seed=seed)

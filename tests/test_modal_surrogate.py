@@ -35,6 +35,7 @@ from test_modal_update import (
 from identification.multimode.model import JointElement, ModalModel, Mode
 from pm_joint.cli import EXIT_NOT_CONVERGED, main
 from pm_joint.inference import load_posterior
+from pm_joint.modal_surrogate import mode_evaluation
 from surrogates.dataset.modal import MODAL_CHANNELS, generate_modal_dataset
 from surrogates.grid import MASK_REASONS
 from surrogates.modal import ModalSurrogate
@@ -58,7 +59,9 @@ def test_a_modes_dataset_is_the_closed_form_duffing_backbone(k3):
     names = ["mode1.frequency_hz", "joint1.cubic_stiffness"]
     box = np.array([[99.0, 101.0], sorted([0.9 * k3, 1.1 * k3])])
     grid = np.geomspace(1e-5, 5e-3, 30)
-    data = generate_modal_dataset(model, names, box, grid, mode=1, n=20, seed=3)
+    data = generate_modal_dataset(
+        mode_evaluation(model, names, grid, 1), names, box, grid, n=20, seed=3
+    )
     assert data.spec.channels == MODAL_CHANNELS
     f1, k = data.X[:, :1], data.X[:, 1:]
     omega_squared = (2 * np.pi * f1) ** 2 + 0.75 * k * grid**2

@@ -3,10 +3,10 @@
 The N-mode twin of the amplitude-grid generation (:mod:`surrogates.dataset.generation`):
 for every designed parameter set of a :class:`~identification.multimode.ModalModel`, the
 backbone a phase-locked test holding mode ``m`` measures, on fixed amplitudes of that
-mode's coordinate, from the N-mode harmonic balance
-(:func:`pm_joint.forward.modal_harmonic.modal_backbone_numpy`, the forward model the
-N-mode updating runs on, evaluated for many sets at once). The channels
-(:data:`MODAL_CHANNELS`):
+mode's coordinate. What computes it is given (:data:`ModeEvaluation`;
+:func:`pm_joint.modal_surrogate.mode_evaluation` runs the N-mode harmonic balance the
+N-mode updating runs on, for many sets at once): this package does not import the
+forward models. The channels (:data:`MODAL_CHANNELS`):
 
 * ``frequency_hz`` and ``damping_ratio`` of the locked mode;
 * ``base_acceleration_m_s2``, the drive the hold needs: the power balance
@@ -24,21 +24,26 @@ Masked entries hold 0 in every value channel, as on the one-mode grid.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from identification.artifacts import versions
-from identification.multimode.model import ModalModel
 from surrogates.dataset.container import ANALYTICAL, FORMAT, FORMAT_VERSION, BackboneDataset
 from surrogates.dataset.design import sample_parameters
 from surrogates.grid import MASK_REASONS, grid_counts, passed_curves
 from surrogates.runtime import MASK_CHANNEL, OTHER_MODES_CHANNEL, SurrogateSpec
 
-__all__ = ["MODAL_CHANNELS", "generate_modal_dataset", "modal_grid_backbones"]
+__all__ = [
+    "MODAL_CHANNELS",
+    "ModeBackbones",
+    "ModeEvaluation",
+    "generate_modal_dataset",
+    "grid_values",
+]
 
 #: The channels of an N-mode surrogate's datasets, in the order they are computed.
 MODAL_CHANNELS = (
@@ -48,27 +53,34 @@ MODAL_CHANNELS = (
 CHUNK = 256
 
 
-def modal_grid_backbones(
-    model: ModalModel,
-    names: Sequence[str],
-    parameters: np.ndarray,
-    amplitudes_m: np.ndarray,
-    mode: int,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Mode ``mode``'s backbones of parameter sets on the amplitude grid.
+class ModeBackbones(NamedTuple):
+    """One mode's backbones of parameter sets on the amplitude grid, each ``(n, A)``.
 
-    Parameters
+    Attributes
     ----------
-    model
-        Template model (structure, and the values of parameters not in ``names``).
-    names
-        Order of the parameter columns.
-    parameters
-        ``(n, len(names))`` parameter sets.
-    amplitudes_m
-        ``(A,)`` amplitudes of mode ``mode``'s coordinate (m), increasing.
-    mode
-        The locked mode, from 1.
+    frequency_hz, damping_ratio
+        The locked mode's frequency and damping ratio.
+    drive_m_s2
+        The base acceleration the hold needs.
+    other_modes_energy_share
+        The other modes' share of the linear modal energy.
+    settled
+        Where the balance settled (elsewhere the values are not a backbone).
+    """
+
+    frequency_hz: np.ndarray
+    damping_ratio: np.ndarray
+    drive_m_s2: np.ndarray
+    other_modes_energy_share: np.ndarray
+    settled: np.ndarray
+
+
+#: Parameter sets ``(n, n_params)`` → :class:`ModeBackbones` on the dataset's grid.
+ModeEvaluation = Callable[[np.ndarray], ModeBackbones]
+
+
+def grid_values(backbones: ModeBackbones) -> tuple[np.ndarray, np.ndarray]:
+    """The dataset's values and mask reasons of one mode's backbones.
 
     Returns
     -------
@@ -76,16 +88,11 @@ def modal_grid_backbones(
         ``(n, A, 5)`` the :data:`MODAL_CHANNELS` (0 where masked); ``(n, A)`` int, 0 for a
         backbone point, else ``1 +`` the index of its reason in ``MASK_REASONS``.
     """
-    from pm_joint.forward.modal_harmonic import modal_backbone_numpy, template_values
-
-    participation = template_values(model)[f"mode{mode}.participation"]
-    out = modal_backbone_numpy(model, parameters, list(names), amplitudes_m, mode=mode)
-    frequency, damping = out.frequency_hz, out.damping_ratio
-    omega = 2 * np.pi * frequency
-    drive = 2 * omega**2 * amplitudes_m * damping / participation
-    shares = np.asarray(out.energy_share)
-    other = 1 - shares[..., mode - 1]
-    settled = np.asarray(out.converged, dtype=bool) & np.isfinite(frequency + damping + other)
+    frequency, damping = backbones.frequency_hz, backbones.damping_ratio
+    drive, other = backbones.drive_m_s2, backbones.other_modes_energy_share
+    settled = np.asarray(backbones.settled, dtype=bool) & np.isfinite(
+        frequency + damping + drive + other
+    )
     powered = settled & (drive > 0)
     # A test stepping its level up holds a point only where its drive exceeds every drive
     # below it on the grid (the one-mode grid's "passed").
@@ -106,48 +113,45 @@ def modal_grid_backbones(
 
 
 def generate_modal_dataset(
-    model: ModalModel,
+    evaluate: ModeEvaluation,
     names: Sequence[str],
     bounds: ArrayLike,
     amplitudes_m: ArrayLike,
     *,
-    mode: int,
     n: int = 500,
     sampler: str = "lhs",
     seed: int = 0,
+    provenance: Mapping[str, Any] | None = None,
 ) -> BackboneDataset:
-    """Mode ``mode``'s backbones of ``n`` designed parameter sets on an amplitude grid.
+    """One mode's backbones of ``n`` designed parameter sets on an amplitude grid.
 
     Parameters
     ----------
-    model
-        Template ModalModel.
+    evaluate
+        The mode's backbones of parameter sets on ``amplitudes_m``
+        (:func:`pm_joint.modal_surrogate.mode_evaluation`: the N-mode balance).
     names
         The parameters that vary (the surrogate's inputs).
     bounds
         ``(len(names), 2)`` the box the sets are drawn in (the prior box of the updating).
     amplitudes_m
-        The grid: amplitudes of mode ``mode``'s coordinate (m), increasing.
-    mode
-        The locked mode, from 1.
+        The grid: amplitudes of the mode's coordinate (m), increasing.
     n, sampler, seed
         The design (:func:`~surrogates.dataset.design.sample_parameters`).
+    provenance
+        What made the backbones (model, mode, method), added to the dataset's provenance.
 
     Returns
     -------
     BackboneDataset
         Every set kept (the mask says where a set has no backbone); channels
-        :data:`MODAL_CHANNELS`; provenance as the one-mode generator's, with ``mode`` and
-        ``model_format``.
+        :data:`MODAL_CHANNELS`; provenance as the one-mode generator's.
     """
     names = list(names)
     box = np.asarray(bounds, dtype=float)
     grid = np.asarray(amplitudes_m, dtype=float)
     parameters = sample_parameters(box, n, sampler=sampler, seed=seed)
-    chunks = [
-        modal_grid_backbones(model, names, parameters[s : s + CHUNK], grid, mode)
-        for s in range(0, n, CHUNK)
-    ]
+    chunks = [grid_values(evaluate(parameters[s : s + CHUNK])) for s in range(0, n, CHUNK)]
     values = np.concatenate([c[0] for c in chunks])
     reasons = np.concatenate([c[1] for c in chunks])
     spec = SurrogateSpec(tuple(names), box, channels=MODAL_CHANNELS, amplitudes_m=grid)
@@ -155,14 +159,11 @@ def generate_modal_dataset(
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
-        "model": model.to_dict(),
-        "model_format": "pm-joint/ModalModel",
-        "mode": mode,
+        **dict(provenance or {}),
         "names": names,
         "bounds": box.tolist(),
         "representation": "amplitude_grid",
         "channels": list(MODAL_CHANNELS),
-        "method": "modal_harmonic",
         "sampler": sampler,
         "seed": seed,
         "amplitudes_m": grid.tolist(),
