@@ -65,6 +65,7 @@ __all__ = [
     "geometric_grid",
     "grid_backbones",
     "grid_counts",
+    "highest_before",
     "measured_grid",
     "measured_on_grid",
     "passed_curves",
@@ -79,6 +80,14 @@ _NUDGE = 1e-6
 MASK_REASONS = ("no_solution", "no_power_input", "passed")
 #: Measured curves that must cover a grid amplitude: fewer give no assembly scatter there.
 MIN_CURVES = 3
+
+
+def highest_before(drive: np.ndarray, powered: np.ndarray) -> np.ndarray:
+    """The largest powered drive before each point along the last axis (−inf at the first):
+    the level a test stepping up has passed by the time it reaches the point."""
+    highest = np.maximum.accumulate(np.where(powered, drive, -np.inf), axis=-1)
+    first = np.full((*drive.shape[:-1], 1), -np.inf)
+    return np.concatenate([first, highest[..., :-1]], axis=-1)
 
 
 def passed_curves(reasons: np.ndarray) -> np.ndarray:
@@ -206,10 +215,7 @@ def grid_backbones(
     frequency, damping = result.frequency_hz, result.damping_ratio
     solved = result.converged & np.isfinite(needed_m_s2) & np.isfinite(frequency) & (frequency > 0)
     powered = solved & (needed_m_s2 > 0)
-    # Levels a test stepping up has passed: the running maximum before each point.
-    candidates = np.where(powered, needed_m_s2, -np.inf)
-    before = np.maximum.accumulate(candidates, axis=1)
-    before = np.concatenate([np.full((needed_m_s2.shape[0], 1), -np.inf), before[:, :-1]], axis=1)
+    before = highest_before(needed_m_s2, powered)
     # And the slope at each grid amplitude: a level that falls there lies past a fold
     # (unknown where the nudged point has no backbone: not counted against it).
     nudged = backbone(

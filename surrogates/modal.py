@@ -94,6 +94,11 @@ class ModalSurrogate:
         pairs = zip(self.parameter_names, box, strict=True)
         return {name: (float(low), float(high)) for name, (low, high) in pairs}
 
+    def box(self, names: list[str] | tuple[str, ...]) -> np.ndarray:
+        """``(len(names), 2)`` the training box's low and high of the named parameters."""
+        bounds = self.bounds
+        return np.array([bounds[n] for n in names])
+
     def write_index(self, folder: str | Path) -> Path:
         """Write ``folder/modal_surrogate.json`` beside the modes' folders."""
         index = {

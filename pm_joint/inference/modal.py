@@ -59,12 +59,12 @@ from pm_joint.forward.modal_op import ModalHarmonicOp, Unrecordable
 from pm_joint.inference.models import (
     HIERARCHICAL,
     POPULATION_MATCHING,
-    POPULATION_SUFFIX,
     amplitudes_within_surrogate,
     check_varying,
     curve_points,
     observe_channel,
     population_draws,
+    population_values,
     surrogate_bounds,
     uniform_priors,
 )
@@ -505,7 +505,7 @@ def _training_box_wall(
     only the network's extrapolation fitted, and the N-mode balance does not. A smooth wall,
     not a hard bound, so that NUTS's trajectories that touch it turn back rather than
     diverge."""
-    box = np.array([surrogate.bounds[n] for n in names])
+    box = surrogate.box(list(names))
     width = WALL_WIDTH * (box[:, 1] - box[:, 0])
     beyond = pt.maximum(box[:, 0] - theta, 0) + pt.maximum(theta - box[:, 1], 0)
     pm.Potential("training_box_wall", -0.5 * pt.sum((beyond / width) ** 2))
@@ -530,10 +530,7 @@ def _scaled_population_theta(
     mu = pm.Deterministic("log_mean", location * mu_std, dims="parameter")
     pm.Deterministic("log_spread", population * sigma_std, dims="parameter")
     eta = location * population_draws(mu_std, population / location * sigma_std, centred, names)
-    theta = pm.Deterministic("theta", theta0 * pt.exp(eta), dims=("curve", "parameter"))
-    for j, name in enumerate(names):
-        pm.Deterministic(f"{name}{POPULATION_SUFFIX}", theta0[j] * pt.exp(mu[j]))
-    return theta
+    return population_values(theta0, names, mu, eta)
 
 
 def hierarchical_scales(names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -574,12 +571,9 @@ def _mode_graph(
     if runtime is None:
         return modal_backbone_graph(model, theta, names, part.grid, mode=part.mode).backbone
     grid = runtime.amplitudes_m
-    # Linear in amplitude between the surrogate's grid points: a constant matrix.
-    weights = np.zeros((part.grid.size, grid.size))
-    for row, a in enumerate(part.grid):
-        right = int(np.clip(np.searchsorted(grid, a), 1, grid.size - 1))
-        share = (a - grid[right - 1]) / (grid[right] - grid[right - 1])
-        weights[row, right - 1], weights[row, right] = 1 - share, share
+    # Linear in amplitude between the surrogate's grid points, a constant matrix: column j
+    # interpolates the j-th unit vector.
+    weights = np.stack([np.interp(part.grid, grid, unit) for unit in np.eye(grid.size)], axis=1)
     on_grid = SurrogateGraph(runtime, names)(theta)
     return pt.tensordot(on_grid, weights, axes=[[1], [1]]).transpose(0, 2, 1)
 
@@ -588,7 +582,6 @@ def draws_outside_box(idata: Any, surrogate: ModalSurrogate) -> float:
     """Share of the hierarchical posterior's per-assembly draws outside the surrogate's
     training box (where its network extrapolates)."""
     theta = idata.posterior["theta"]
-    low = np.array([surrogate.bounds[n][0] for n in theta["parameter"].values])
-    high = np.array([surrogate.bounds[n][1] for n in theta["parameter"].values])
+    low, high = surrogate.box(list(theta["parameter"].values)).T
     values = theta.values
     return float(np.mean(np.any((values < low) | (values > high), axis=-1)))

@@ -488,7 +488,14 @@ def population_theta(
     ``pm.Model`` with the coords ``curve`` and ``parameter``."""
     mu = pm.Normal("log_mean", 0.0, location_scale, dims="parameter")
     sigma = pm.HalfNormal("log_spread", population_scale, dims="parameter")
-    eta = population_draws(mu, sigma, centred, names)
+    return population_values(theta0, names, mu, population_draws(mu, sigma, centred, names))
+
+
+def population_values(
+    theta0: np.ndarray, names: Sequence[str], mu: pt.TensorVariable, eta: pt.TensorVariable
+) -> pt.TensorVariable:
+    """Each curve's parameters ``θ = θ₀ exp(η)`` as ``theta`` (curve × parameter) and each
+    parameter's population value ``θ₀ exp(μ)`` as ``{name}{POPULATION_SUFFIX}``."""
     theta = pm.Deterministic("theta", theta0 * pt.exp(eta), dims=("curve", "parameter"))
     for j, name in enumerate(names):
         pm.Deterministic(f"{name}{POPULATION_SUFFIX}", theta0[j] * pt.exp(mu[j]))

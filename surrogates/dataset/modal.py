@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike
 from identification.artifacts import versions
 from surrogates.dataset.container import ANALYTICAL, FORMAT, FORMAT_VERSION, BackboneDataset
 from surrogates.dataset.design import sample_parameters
-from surrogates.grid import MASK_REASONS, grid_counts, passed_curves
+from surrogates.grid import grid_counts, highest_before, passed_curves
 from surrogates.runtime import MASK_CHANNEL, OTHER_MODES_CHANNEL, SurrogateSpec
 
 __all__ = [
@@ -96,17 +96,9 @@ def grid_values(backbones: ModeBackbones) -> tuple[np.ndarray, np.ndarray]:
     powered = settled & (drive > 0)
     # A test stepping its level up holds a point only where its drive exceeds every drive
     # below it on the grid (the one-mode grid's "passed").
-    highest_below = np.maximum.accumulate(np.where(powered, drive, -np.inf), axis=-1)
-    highest_below = np.concatenate(
-        [np.full((*drive.shape[:-1], 1), -np.inf), highest_below[..., :-1]], axis=-1
-    )
-    reachable = powered & (drive > highest_below)
-    code = {reason: 1 + i for i, reason in enumerate(MASK_REASONS)}
-    reasons = np.where(
-        ~settled,
-        code["no_solution"],
-        np.where(~powered, code["no_power_input"], np.where(~reachable, code["passed"], 0)),
-    )
+    reachable = powered & (drive > highest_before(drive, powered))
+    # Codes 1 + the index in MASK_REASONS, as the one-mode grid's.
+    reasons = np.select([~settled, ~powered, ~reachable], [1, 2, 3], default=0)
     values = np.stack([frequency, damping, drive, other, reachable.astype(float)], axis=-1)
     values[~reachable, :4] = 0.0
     return values, reasons
