@@ -18,11 +18,9 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import sys
 import warnings
 from collections.abc import Iterator, Sequence
-from pathlib import Path
 from typing import Any
 
 from identification.effects import CATALOGUE
@@ -34,6 +32,21 @@ from identification.rig import MODAL_RIG_PRESETS, RIG_PRESETS
 from identification.rig.modal_rig import TESTS as MODAL_RIG_TESTS
 from identification.rig.presets import TWO_MODE_RATIO
 from identification.sindy import PAPER_LIBRARY
+from pm_joint.cli_common import (
+    EXIT_NOT_CONVERGED,
+    identify_options,
+    trace_folder,
+    verdict_exit,
+    workspace_options,
+)
+from pm_joint.cli_modes import (
+    decay_mode_backbones,
+    identify_modal_model,
+    is_modal_model,
+    modal_hold_backbones,
+    train_modal_surrogates,
+    update_modal_model,
+)
 from pm_joint.sampler_defaults import (
     DEFAULT_FORWARD,
     FORWARD_MODELS,
@@ -41,7 +54,6 @@ from pm_joint.sampler_defaults import (
     SAMPLERS,
     default_help,
     forward_help,
-    sampler_defaults,
 )
 from surrogates.labels import MISFIT_POLICIES
 
@@ -137,30 +149,6 @@ def add_record_options(parser: argparse.ArgumentParser) -> None:
                        "looked for (Hz; default: frequency channel or spectrum)")  # fmt: skip
 
 
-def _workspace_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The Workspace keywords of the record options."""
-    from identification.measurements.columns import ColumnLayout
-
-    layout = ColumnLayout(
-        test=args.test, time=args.time, response=args.response, quantity=args.quantity,
-        excitation=args.excitation, excitation_kind=args.excitation_kind,
-        excitation_gain=args.excitation_gain, frequency=args.frequency, level=args.level,
-        decimal_comma=True if args.decimal_comma else None, relative=args.relative_response,
-        forcing_gain=args.forcing_gain,
-    )  # fmt: skip
-    decay = {"window_periods": args.window_periods, "edge_periods": args.edge_periods or 0.0,
-             "band_hz": args.band}  # fmt: skip
-    return {"layout": layout, "decay_options": decay}
-
-
-def _identify_options(args: argparse.Namespace) -> dict[str, Any]:
-    """Preprocessing options of the identification from the record options."""
-    edge = args.edge_periods
-    if edge is None:
-        edge = DECAY_EDGE_PERIODS if args.test == "free-decay" else 20.0
-    return {"edge_periods": edge, "band_hz": args.band}
-
-
 def _cmd_effects(args: argparse.Namespace) -> None:
     width = max(len(n) for n in CATALOGUE)
     for effect in CATALOGUE.values():
@@ -231,12 +219,12 @@ def _cmd_backbones(args: argparse.Namespace) -> None:
     from pm_joint.workspace import Workspace
 
     workspace = Workspace(args.dir, backbones_csv=args.out, n_periods=args.periods,
-                          **_workspace_options(args))  # fmt: skip
+                          **workspace_options(args))  # fmt: skip
     if args.modes > 1:
         if args.test == "free-decay":
-            _decay_modes(workspace, args)
+            decay_mode_backbones(workspace, args)
         else:
-            _modal_backbones(workspace, args)
+            modal_hold_backbones(workspace, args)
         return
     backbones = campaign_backbones(workspace, mode_shapes=args.mode_shapes,
                                    second_mode_share=args.second_mode_share)  # fmt: skip
@@ -249,38 +237,6 @@ def _cmd_backbones(args: argparse.Namespace) -> None:
 
         for line in decay_second_mode_warnings(workspace, mode_shapes=args.mode_shapes):
             print(line, file=sys.stderr)
-
-
-def _decay_modes(workspace: Any, args: argparse.Namespace) -> None:
-    """``backbones --test free-decay --modes N`` (N ≥ 2): each mode's backbone."""
-    from pm_joint.pipeline import campaign_decay_modes
-
-    decays = campaign_decay_modes(workspace, args.modes, mode_shapes=args.mode_shapes)
-    for decay in decays:
-        print("\n".join(decay.summary()))
-    print(f"extracted {len(decays)} decay(s) by mode ({args.modes} modes) to "
-          f"{workspace.backbones_csv}")  # fmt: skip
-
-
-def _modal_backbones(workspace, args: argparse.Namespace) -> None:
-    from identification.measurements.modal_backbones import sidecar_path
-    from pm_joint.pipeline import campaign_modal_backbones
-
-    result = campaign_modal_backbones(workspace, args.modes, mode_shapes=args.mode_shapes)
-    holds = sum(len(c.holds) for c in result)
-    print(f"extracted {len(result)} record(s) × {args.modes} modes, {holds} holds ({args.test}) "
-          f"to {workspace.backbones_csv} (sensors and shapes: "
-          f"{sidecar_path(workspace.backbones_csv)})")  # fmt: skip
-    for curve in result:
-        f = curve.modal_filter
-        worst = int(curve.reconstruction_error.argmax())
-        print(
-            f"{curve.label}: locked mode {curve.locked_mode} of "
-            + ", ".join(f"{x:.5g}" for x in f.frequencies_hz)
-            + f" Hz; shapes {f.source}; complex-to-real error up to {f.alignment_error.max():.2g}"
-            f"; reconstruction error up to {curve.reconstruction_error[worst]:.2g} "
-            f"({f.sensor_names[worst]})"
-        )
 
 
 def _positive_int(text: str) -> int:
@@ -297,35 +253,14 @@ def _cmd_identify(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import identify_campaign
     from pm_joint.workspace import Workspace
 
-    workspace = Workspace(args.dir, **_workspace_options(args))
+    workspace = Workspace(args.dir, **workspace_options(args))
     if args.modes > 1:
-        _identify_modes(workspace, args)
+        identify_modal_model(workspace, args)
         return
     result = identify_campaign(workspace, args.effects, n_records=args.records, out=args.out,
-                               **_identify_options(args))  # fmt: skip
+                               **identify_options(args))  # fmt: skip
     print(result.summary())
     print(result.model.equation())
-    print(f"wrote {args.out}")
-
-
-def _identify_modes(workspace: Any, args: argparse.Namespace) -> None:
-    """``identify --modes N`` (N ≥ 2): coupled modal equations, a ModalModel JSON."""
-    from identification.measurements.modes import read_modes
-    from identification.sindy.modal_coordinates import ModalSettings
-    from identification.sindy.modal_identify import identify_modes
-
-    shapes = None
-    if args.mode_shapes:
-        shapes = read_modes(args.mode_shapes, decimal_comma=args.decimal_comma or None, points=None)
-    records = workspace.records[: min(args.records, len(workspace.records))]
-    settings = ModalSettings(edge_periods=_identify_options(args)["edge_periods"],
-                             band_hz=args.band, joint_sensor=args.joint_sensor)  # fmt: skip
-    result = identify_modes(records, args.modes, args.effects, mode_shapes=shapes,
-                            settings=settings)  # fmt: skip
-    result.model.to_json(args.out)
-    print(result.summary())
-    for mode in range(1, args.modes + 1):
-        print(result.model.equation(mode))
     print(f"wrote {args.out}")
 
 
@@ -333,11 +268,11 @@ def _cmd_train_surrogate(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import label_records, train_surrogate_stage
     from pm_joint.workspace import Workspace
 
-    if _is_modal_model(args.model):
-        _train_modal_surrogate(args)
+    if is_modal_model(args.model):
+        train_modal_surrogates(args)
         return
-    workspace = Workspace(args.dir, model=args.model, **_workspace_options(args))
-    labels = label_records(workspace, **_identify_options(args))
+    workspace = Workspace(args.dir, model=args.model, **workspace_options(args))
+    labels = label_records(workspace, **identify_options(args))
     with _executor(args) as executor:
         runtime = train_surrogate_stage(
             workspace, args.out, labels=labels, n_curves=args.curves,
@@ -359,49 +294,12 @@ def _cmd_train_surrogate(args: argparse.Namespace) -> None:
             )
 
 
-def _train_modal_surrogate(args: argparse.Namespace) -> None:
-    """``train-surrogate`` with a ModalModel: one surrogate per measured mode."""
-    from identification.multimode.model import ModalModel
-    from pm_joint.modal_surrogate import train_modal_surrogate
-
-    model = ModalModel.from_json(args.model)
-    measured = _mode_backbones(args, model)
-    surrogate = train_modal_surrogate(
-        model, measured, args.out, n_curves=args.curves, n_amplitudes=args.amplitudes,
-        max_epochs=args.epochs, seed=args.seed,
-    )  # fmt: skip
-    names = ", ".join(surrogate.parameter_names)
-    print(f"wrote {args.out}/modal_surrogate.json: modes {surrogate.modes}, parameters {names}")
-    for mode, runtime in surrogate.runtimes.items():
-        analytical = runtime.metadata["test"]["analytical"]
-        for channel in ("frequency_hz", "damping_ratio"):
-            ratios = analytical["ratios"][channel]
-            scatter = ratios.get("to_scatter_max")
-            print(
-                f"mode {mode} test (analytical), {channel}: ÷ linear baseline "
-                f"{ratios['to_linear']:.3g}, ÷ cubic {ratios['to_cubic']:.3g}, ÷ assembly "
-                "scatter (worst amplitude) " + ("unknown" if scatter is None else f"{scatter:.3g}")
-            )
-
-
-def _mode_backbones(args: argparse.Namespace, model: Any) -> dict:
-    """The campaign's per-mode backbones (the ``--modes N`` table, written first when
-    missing), by mode."""
-    from pm_joint.inference.modal import read_mode_backbones
-    from pm_joint.workspace import Workspace
-
-    workspace = Workspace(args.dir, **_workspace_options(args))
-    if not workspace.backbones_csv.is_file():
-        _extract_modes(workspace, model.n_modes, args)
-    return read_mode_backbones(workspace.backbones_csv)
-
-
 def _cmd_criticize(args: argparse.Namespace) -> None:
     from pm_joint.html import rounds_text
     from pm_joint.pipeline import criticize_campaign
     from pm_joint.workspace import Workspace
 
-    workspace = Workspace(args.dir, **_workspace_options(args))
+    workspace = Workspace(args.dir, **workspace_options(args))
     with _executor(args) as executor:
         crit = criticize_campaign(
             workspace, args.model, args.out, rounds=args.rounds, executor=executor
@@ -410,24 +308,20 @@ def _cmd_criticize(args: argparse.Namespace) -> None:
     print(f"wrote {args.out}/criticism.json")
 
 
-#: Exit code of `pm-joint update` when the posterior is written but did not converge.
-EXIT_NOT_CONVERGED = 3
-
-
 def _cmd_update(args: argparse.Namespace) -> int:
     from pm_joint.pipeline import posterior_report, update_backbones
     from pm_joint.workspace import Workspace
 
-    if args.model and _is_modal_model(args.model):
-        return _update_modes(args)
+    if args.model and is_modal_model(args.model):
+        return update_modal_model(args)
     forward = args.forward or DEFAULT_FORWARD[args.population]
     if forward == "surrogate" and not args.surrogate:
         raise ValueError("--forward surrogate needs --surrogate SURROGATE_DIR")
     if forward != "surrogate" and not args.model:
         raise ValueError(f"--forward {forward} needs --model model.json")
     workspace = Workspace(args.dir, model=args.model, surrogate=args.surrogate,
-                          **_workspace_options(args))  # fmt: skip
-    trace = _trace_folder(args, forward)
+                          **workspace_options(args))  # fmt: skip
+    trace = trace_folder(args, forward)
     idata = update_backbones(
         workspace, args.out, population=args.population, forward=forward,
         sampler=args.sampler, draws=args.draws, tune=args.tune, chains=args.chains,
@@ -438,100 +332,14 @@ def _cmd_update(args: argparse.Namespace) -> int:
     if args.report:
         posterior_report(workspace, args.report)
         print(f"wrote {args.report}/report.json")
-    return _verdict_exit(idata, args.out)
-
-
-def _verdict_exit(idata: Any, out: str) -> int:
-    """Print the convergence verdict of ``update``; its exit code (3 when not converged)."""
-    from pm_joint.analysis import convergence_verdict
-
-    verdict = convergence_verdict(idata)
-    print(f"convergence: {verdict.headline()}")
-    if not verdict.converged:
-        print(
-            f"pm-joint update: NOT CONVERGED: the posterior in {out} is not a result yet; "
-            "continue it with --resume and more --draws (exit code "
-            f"{EXIT_NOT_CONVERGED})",
-            file=sys.stderr,
-        )
-        return EXIT_NOT_CONVERGED
-    return 0
-
-
-def _trace_folder(args: argparse.Namespace, forward: str) -> str | Path | None:
-    """``update``'s trace folder: ``--trace``, else the output's name with ``.zarr``; none
-    for nutpie, which keeps its draws in memory (a folder asked for is then refused)."""
-    if args.trace:
-        return args.trace
-    sampler = args.sampler or sampler_defaults(args.population, forward).sampler
-    return None if sampler == "nutpie" else Path(args.out).with_suffix(".zarr")
-
-
-def _is_modal_model(source: str) -> bool:
-    """Whether ``--model`` names a ModalModel JSON file (its versioned format says so)."""
-    from identification.multimode.model import FORMAT as MODAL_FORMAT
-
-    path = Path(source)
-    if path.suffix.lower() != ".json" or not path.is_file():
-        return False  # a preset name, or a file JointModel's reader reports on
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError):
-        return False
-    return isinstance(data, dict) and data.get("format") == MODAL_FORMAT
-
-
-def _update_modes(args: argparse.Namespace) -> int:
-    """``update`` with a ModalModel: every mode's backbones (the ``--modes N`` table)."""
-    from identification.multimode.model import ModalModel
-    from pm_joint.inference.modal import MODAL_FORWARD, MODAL_SURROGATE_FORWARD
-    from pm_joint.modal_update import mode_report, update_modes
-    from surrogates.modal import ModalSurrogate
-
-    if args.forward == "pll" or (args.forward == "surrogate" and not args.surrogate):
-        raise ValueError(
-            f"{args.model} is a ModalModel: it updates through its N-mode harmonic balance "
-            "graph (--forward harmonic, the default) or, with --surrogate DIR, through the "
-            "N-mode surrogate train-surrogate wrote for it; not the PLL"
-        )
-    if args.surrogate and args.forward == "harmonic":
-        raise ValueError("--forward harmonic and --surrogate: give one forward model")
-    model = ModalModel.from_json(args.model)
-    surrogate = ModalSurrogate.load(args.surrogate) if args.surrogate else None
-    measured = _mode_backbones(args, model)
-    forward = MODAL_FORWARD if surrogate is None else MODAL_SURROGATE_FORWARD
-    trace = _trace_folder(args, forward)
-    idata = update_modes(
-        model, measured, args.out, population=args.population, sampler=args.sampler,
-        draws=args.draws, tune=args.tune, chains=args.chains, seed=args.seed, trace=trace,
-        resume=args.resume, surrogate=surrogate,
-    )  # fmt: skip
-    if "outside_surrogate_box" in idata.attrs:
-        share = idata.attrs["outside_surrogate_box"]
-        print(f"draws outside the surrogate's training box: {100 * share:.1f} %")
-    print(f"wrote {args.out} (modes {', '.join(map(str, sorted(measured)))} of {args.model})")
-    print(f"sampler: {idata.attrs['sampler']} ({idata.attrs['sampler_reason']})")
-    if args.report:
-        for m in measured:
-            folder = Path(args.report) / f"mode{m}"
-            mode_report(idata, measured, m, folder)
-            print(f"wrote {folder}/report.json")
-    return _verdict_exit(idata, args.out)
-
-
-def _extract_modes(workspace: Any, n_modes: int, args: argparse.Namespace) -> None:
-    """The per-mode backbones a ModalModel is updated on, when the campaign has none yet."""
-    from pm_joint.pipeline import campaign_decay_modes, campaign_modal_backbones
-
-    extract = campaign_decay_modes if args.test == "free-decay" else campaign_modal_backbones
-    extract(workspace, n_modes)
+    return verdict_exit(idata, args.out)
 
 
 def _cmd_report(args: argparse.Namespace) -> None:
     from pm_joint.pipeline import run_report
     from pm_joint.workspace import Workspace
 
-    workspace = Workspace(args.dir, posterior=args.posterior, **_workspace_options(args))
+    workspace = Workspace(args.dir, posterior=args.posterior, **workspace_options(args))
     index = run_report(workspace, args.out, criticism=args.criticism)
     print(f"wrote {index}")
 
@@ -539,7 +347,7 @@ def _cmd_report(args: argparse.Namespace) -> None:
 def _cmd_predict(args: argparse.Namespace) -> None:
     from pm_joint.predict import predict_record, write_prediction
 
-    layout = _workspace_options(args)["layout"]
+    layout = workspace_options(args)["layout"]
     prediction = predict_record(args.model, args.record, layout=layout,
                                 mode_shapes=args.mode_shapes)  # fmt: skip
     write_prediction(prediction, args.out)
