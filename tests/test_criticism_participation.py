@@ -25,7 +25,9 @@ from identification.criticism.participation import (
 )
 from identification.criticism.words import second_mode_words
 from identification.measurements.backbone import BackboneSet
+from identification.rig.presets import RIG_PRESETS, lab_hidden_scenario
 from pm_joint.cli import main
+from studies.campaigns import first_fit
 from studies.second_mode import campaign, independent_campaign, second_mode_campaign
 
 SEED = 1
@@ -64,6 +66,36 @@ def test_the_coupling_names_the_independent_simulators_mode_at_1_2():
     assert mode.where[0].startswith("measured at the sensors: the second mode's harmonic 2")
     quantile = chi2.ppf(0.99, 2 * len(measured))
     assert f"beyond χ² {quantile:.3g} at 1 %" in second_mode_words(crit)
+
+
+def test_a_mode_near_1_1_is_named_as_seen_beside_the_first():
+    """Near 1:1 the independent simulator's one-point backbone shows the second mode too
+    little for the screen (block 13 000 000: the catalogue explains it or nothing is
+    missing), but its coordinate's fundamental is shaped by its resonance: the criticism
+    names it as seen beside the first (mechanism "sensor", no exchange claimed), placed
+    within 5 % of the simulator's frequency, and its words say the fundamental does not
+    tell an exchange."""
+    measured, model, truth, participation = campaign("independent near 1:1", SEED)
+    answer = locate_by_participation(participation)
+    assert answer.shows and not answer.exchanges
+    crit = criticize(model, measured, participation=participation)
+    mode = crit.second_mode
+    assert crit.verdict == Verdict.SECOND_MODE, crit.summary()
+    assert mode.named_by == "participation" and mode.mechanism == "sensor"
+    assert abs(mode.frequency_hz - truth) <= 0.05 * truth, (mode.frequency_hz, truth)
+    assert mode.resonance_gain == pytest.approx(answer.profile.gain)
+    words = second_mode_words(crit)
+    assert "shows in the response beside it" in words
+    assert "not told at the fundamental" in words
+
+
+def test_a_mode_near_neither_route_is_not_named():
+    """A second mode at 1.5 × the first (the independent simulator, its second coordinate
+    measured) is placed by neither route: the one-mode model's criticism names no mode."""
+    measured, _, participation = independent_campaign(1.5, SEED)
+    start = first_fit(RIG_PRESETS[lab_hidden_scenario("microslip")].base_model, measured)
+    crit = criticize(start, measured, participation=participation)
+    assert not crit.second_mode.named, crit.second_mode.text
 
 
 def test_a_mode_the_shaker_drives_at_2w_is_placed_but_not_named():

@@ -23,7 +23,8 @@ from browser import assert_page_works, find_browser, require_browser
 #: claims below are about the stages and the page, none about a figure's accuracy, so they are
 #: the same at either size; ``--size small`` itself runs with ``-m slow``.
 CI_SIZE = {"assemblies": 3, "n_levels": 6, "surrogate_curves": 40, "surrogate_epochs": 10,
-           "draws": 200, "tune": 100, "hierarchical_draws": 60}  # fmt: skip
+           "draws": 200, "tune": 100, "hierarchical_draws": 60,
+           "hierarchical_tune": 60}  # fmt: skip
 
 
 def _run_demo(out: Path, size: dict | None = None) -> subprocess.CompletedProcess:

@@ -81,6 +81,10 @@ coordinate (``backbones --modes 2``), its participation places the named mode
 harmonic is located and the coupling's drive takes more than its threshold off, the
 participation *names* the mode without the screen: a mode that takes energy from the
 criticised one at twice its frequency, which a linear mode driven by the shaker does not.
+Where the screen names none but the coordinate's fundamental is located (a mode near the
+first), the participation names it as *seen beside the first* (:data:`SENSOR`): the sensors
+show a mode the one-mode model lacks; whether it exchanges energy through the joint the
+fundamental does not tell.
 """
 
 from __future__ import annotations
@@ -172,8 +176,12 @@ class SecondMode:
         (the two-mode refit of one response point's backbone); empty where not located.
     named_by, exchange, exchange_threshold
         What named it (``"screen"``, ``"participation"``: the coupling's drive of the other
-        mode's coordinate at ``2ω``; empty: not named), that drive's χ² and the χ² quantile
-        it must exceed (NaN: none).
+        mode's coordinate at ``2ω``, or its fundamental shaped by a resonance; empty: not
+        named), that drive's χ² and the χ² quantile it must exceed (NaN: none).
+    resonance_gain
+        Named by its coordinate's fundamental (mechanism :data:`SENSOR`): the χ² its
+        resonance takes off a mode too far to resonate
+        (:attr:`~.participation.ParticipationLocation.shows`); NaN otherwise.
     """
 
     named: bool
@@ -195,6 +203,7 @@ class SecondMode:
     named_by: str = ""
     exchange: float = float("nan")
     exchange_threshold: float = float("nan")
+    resonance_gain: float = float("nan")
 
     @property
     def text(self) -> str:
@@ -345,8 +354,8 @@ class _Search:
         catalogue = max(float(decision.observed.catalogue[0]), self.catalogue_refit_gain)
         why, threshold = "", float("nan")
         answer = self.participation_answer
-        by_participation = answer is not None and answer.exchanges
-        if by_participation:
+        exchanges = answer is not None and answer.exchanges
+        if exchanges:
             why = ""  # named by its participation (module notes): the screen is not needed
         elif not self.located.any():
             why = (
@@ -362,6 +371,12 @@ class _Search:
             threshold = self.threshold()
             if gain <= threshold:
                 why = f"its gain Δχ² {gain:.4g} is below its calibrated threshold {threshold:.3g}"
+        # Not named by the backbone, a mode its coordinate's fundamental places is still seen
+        # beside the first at the sensors (module notes): named so, no exchange claimed.
+        shows = bool(why) and answer is not None and answer.shows
+        if shows:
+            why = ""
+        by_participation = exchanges or shows
         refit = self.placed() if not why else None
         location = "" if refit is None else refit.why_not_located
         by_refit = refit is not None and refit.method != PARTICIPATION
@@ -379,9 +394,10 @@ class _Search:
         # Located, the ratio is to the first frequency its profile was placed against (the
         # participation's: the holds' lowest level; the refit's: the base model's).
         first = refit.first_frequency_hz if located else modes.first_frequency_hz
+        mechanism = modes.mechanisms[route] if refit is None else refit.route
         return SecondMode(
             named=not why,
-            mechanism=modes.mechanisms[route] if refit is None else refit.route,
+            mechanism=SENSOR if shows else mechanism,
             ratio=refit.frequency_hz / first if located else nan,
             frequency_hz=refit.frequency_hz if located else nan,
             first_frequency_hz=first,
@@ -399,6 +415,7 @@ class _Search:
             named_by="" if why else (PARTICIPATION if by_participation else "screen"),
             exchange=float("nan") if answer is None else answer.exchange,
             exchange_threshold=nan if answer is None else answer.exchange_threshold,
+            resonance_gain=answer.profile.gain if shows else nan,
         )  # fmt: skip
 
     def unmeasured(self, gain: float, located: bool) -> str:

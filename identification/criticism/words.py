@@ -79,7 +79,13 @@ def _verdict_words(crit: Criticism) -> str:
 def second_mode_words(crit: Criticism) -> str:
     """The second-mode finding in words: the mode, how it beats the catalogue, where it shows."""
     mode = crit.second_mode
-    if mode.named_by == PARTICIPATION:
+    if mode.named_by == PARTICIPATION and np.isfinite(mode.resonance_gain):
+        beyond = (
+            f"its coordinate's fundamental at the sensors is shaped by its resonance: "
+            f"Δχ² {mode.resonance_gain:.4g} off a mode too far to resonate; whether it "
+            "exchanges energy through the joint is not told at the fundamental"
+        )
+    elif mode.named_by == PARTICIPATION:
         level = f"{100 * EXCHANGE_LEVEL:g} %"
         beyond = (
             f"its drive of the second mode's coordinate at 2ω takes Δχ² {mode.exchange:.4g} off "
