@@ -21,6 +21,7 @@ import contextlib
 import sys
 import warnings
 from collections.abc import Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
 from identification.effects import CATALOGUE
@@ -306,6 +307,10 @@ def _cmd_criticize(args: argparse.Namespace) -> None:
         )
     print(rounds_text(crit.rounds))
     print(f"wrote {args.out}/criticism.json")
+    if args.add_mode:
+        added = crit.add_mode()
+        print(added.text)
+        print(f"wrote {added.model.to_json(Path(args.out) / 'two_mode_model.json')}")
 
 
 def _cmd_update(args: argparse.Namespace) -> int:
@@ -516,6 +521,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=0,
         help="add up to this many effects, best proposed first, each round followed by a swap step",
+    )
+    p.add_argument(
+        "--add-mode",
+        action="store_true",
+        help="add the named second mode to the (last round's) model and write the two-mode "
+        "model to OUT/two_mode_model.json (exit 2 where no mode is named at a located frequency)",
     )
     _add_executor_options(
         p, "dask LocalCluster workers refitting the candidate effects (default: serial; the "

@@ -189,6 +189,10 @@ def _criticism_of_holds(out: Path, cfg: TwoModeSize, stages) -> Section:
         f"the criticism of the one-mode model answers {crit.verdict!s}; second mode: "
         f"{'named' if found.named else 'not named'} ({found.text})"
     )
+    if found.named and found.located:  # add it, as `criticize --add-mode` does
+        added = crit.add_mode()
+        added.model.to_json(out / "criticism_one_mode" / "two_mode_model.json")
+        answer += f"; {added.text}"
     print(f"[pm-joint demo] {answer}")
     section = criticism_section(crit.to_dict(), out / "criticism_one_mode", out)
     intro = (

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+from identification.multimode.model import ModalModel
 from identification.rig.modal_rig import ModalRig, small_amplitude_frequencies_hz
 from pm_joint.cli import EXIT_NOT_CONVERGED
 from pm_joint.demo_modes import PRESET
@@ -49,3 +50,7 @@ def test_two_modes_demo_runs_end_to_end_at_small_size(tmp_path):
     assert criticism["verdict"] == "explained by a second mode"
     truth = small_amplitude_frequencies_hz(ModalRig.preset(PRESET).model)[1]
     assert criticism["second_mode"]["frequency_hz"] == pytest.approx(truth, rel=0.05)
+    # the named mode added, as `criticize --add-mode` does: the rig's second mode within 5 %
+    added = ModalModel.from_json(tmp_path / "criticism_one_mode" / "two_mode_model.json")
+    assert added.modes[1].frequency_hz == pytest.approx(truth, rel=0.05)
+    assert "added a second mode at" in done.stdout

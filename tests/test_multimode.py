@@ -303,9 +303,12 @@ def test_batch_equals_single_sets():
             elements=(JointElement(CUBIC, v[1]),),
             couplings=(Coupling(1, (1, 1), 2 * KAPPA), Coupling(2, (2, 0), v[2])),
         )
+        assert model.with_parameters(dict(zip(names, v, strict=True))) == single
         alone = nonlinear_modes(single, a)
         np.testing.assert_allclose(batch.frequency_hz[row], alone.frequency_hz, rtol=1e-12)
         np.testing.assert_allclose(batch.damping_ratio[row], alone.damping_ratio, rtol=1e-8)
+    with pytest.raises(ValueError, match="unknown parameters"):
+        model.with_parameters({"mode3.frequency_hz": 1.0})
 
 
 def test_json_round_trip_and_validation(tmp_path):

@@ -99,6 +99,7 @@ from identification.criticism.config import (
 from identification.criticism.decision import Decision
 from identification.criticism.ending import LoopEnd
 from identification.criticism.groups import Groups
+from identification.criticism.mode_refit import ModeAdded, add_mode
 from identification.criticism.moves import Add, Swap, SwapTerm, run_rounds
 from identification.criticism.plots import write_figures
 from identification.criticism.records import (
@@ -397,6 +398,21 @@ class Criticism:
         (:class:`~identification.criticism.moves.Add`; ``shape``: start values of its
         fit). The returned criticism's :attr:`history` and rounds continue this one's."""
         return Add(effect, shape).apply(self)
+
+    def add_mode(self) -> ModeAdded:
+        """The model with the named second mode added (:func:`~.mode_refit.add_mode`): a
+        two-mode :class:`~identification.multimode.ModalModel` and the χ² before and after.
+
+        Raises
+        ------
+        ValueError
+            No second mode is named at a located frequency (the finding's reason).
+        """
+        mode = self.second_mode
+        if not (mode.named and mode.located):
+            why = mode.why or mode.location or "its frequency is not located"
+            raise ValueError(f"no second mode to add: {why}")
+        return add_mode(self.decision, mode.frequency_hz)
 
     def swap(self, alternatives: Mapping[str, Sequence[str]], last: str) -> Criticism:
         """The backward/swap step (:class:`~identification.criticism.moves.Swap`)."""

@@ -36,6 +36,7 @@ stated to ±5 %). Its *interval* is every ratio within ``SEPARATION`` of the bes
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -60,7 +61,9 @@ __all__ = [
     "PARAMETERS",
     "SETTINGS",
     "Family",
+    "ModeAdded",
     "RefitProfile",
+    "add_mode",
     "backbone_channels",
     "refit_profiles",
     "two_mode_model",
@@ -427,3 +430,104 @@ def refit_profiles(decision: Decision) -> tuple[RefitProfile, ...]:
     """Each route's refit profile at ``decision`` (:data:`FAMILIES`, module notes)."""
     gains = _Gains(decision)
     return tuple(_family_profile(gains, family) for family in FAMILIES)
+
+
+@dataclass(frozen=True)
+class ModeAdded:
+    """A second mode added to the criticised model (:func:`add_mode`).
+
+    Attributes
+    ----------
+    model
+        The two-mode model: the refitted base model as mode 1, the second mode at
+        ``frequency_hz`` with the route's values at the refit's grid ratio nearest it.
+    route
+        :data:`JOINT_ROUTE` or :data:`COUPLING_ROUTE`: the refit's family it was taken from.
+    frequency_hz
+        The second mode's frequency in the model (the grid ratio's).
+    chi2_before, chi2_after
+        χ² of the data against the one-mode and the two-mode model in the criticism's
+        whitened metric, the base model's own parameters refitted to first order (as every
+        column of the criticism).
+    reference_gain
+        What the free-form reference (a stiffness and a damping free at every level) takes
+        off the one-mode model, for scale.
+    """
+
+    model: ModalModel
+    route: str
+    frequency_hz: float
+    chi2_before: float
+    chi2_after: float
+    reference_gain: float
+
+    @property
+    def gain(self) -> float:
+        """The χ² the second mode takes off."""
+        return self.chi2_before - self.chi2_after
+
+    @property
+    def text(self) -> str:
+        """One line: the mode added and the error falling."""
+        return (
+            f"added a second mode at {self.frequency_hz:.4g} Hz ({self.route} route): χ² "
+            f"{self.chi2_before:.4g} → {self.chi2_after:.4g} (Δχ² {self.gain:.4g}; the "
+            f"free-form reference takes {self.reference_gain:.4g})"
+        )
+
+    def to_dict(self) -> dict[str, object]:
+        return {"model": self.model.to_dict(), "route": self.route,
+                "frequency_hz": self.frequency_hz, "chi2_before": self.chi2_before,
+                "chi2_after": self.chi2_after, "gain": self.gain,
+                "reference_gain": self.reference_gain, "text": self.text}  # fmt: skip
+
+
+def add_mode(decision: Decision, frequency_hz: float) -> ModeAdded:
+    """The criticised model with a second mode near ``frequency_hz`` added.
+
+    The route is the refit family whose grid holds ``frequency_hz`` over the base model's
+    first frequency (:data:`FAMILIES`); its profile is refitted (module notes) and the
+    values at the grid ratio nearest ``frequency_hz`` set the second mode's joint shape
+    entry, coupling and base participation.
+
+    Parameters
+    ----------
+    decision
+        The criticism's decision (its data, metric and base model).
+    frequency_hz
+        Where the second mode was located (by its participation or by the refit).
+
+    Raises
+    ------
+    ValueError
+        No family's grid holds the frequency, or the refit solved no ratio near it (a mode
+        the backbone crosses).
+    """
+    gains = _Gains(decision)
+    ratio = frequency_hz / gains.first_hz
+    family = next(
+        (f for f in FAMILIES if min(f.ratios) - 0.05 <= ratio <= max(f.ratios) + 0.05), None
+    )
+    if family is None:
+        raise ValueError(
+            f"a second mode at {frequency_hz:.4g} Hz (ratio {ratio:.3g}) is on neither route's "
+            f"grid ({', '.join(f'{f.route} {min(f.ratios)}–{max(f.ratios)}' for f in FAMILIES)})"
+        )
+    profile = _family_profile(gains, family)
+    distance = np.where(np.isfinite(profile.profile), np.abs(profile.ratios - ratio), np.inf)
+    best = int(np.argmin(distance))
+    if not np.isfinite(distance[best]) or distance[best] > LOCATED_WIDTH / 2:
+        raise ValueError(
+            f"the refit solved no ratio within {LOCATED_WIDTH / 2:.0%} of {ratio:.3g}: the "
+            "backbone crosses the mode there"
+        )
+    at_hz = profile.ratios[best : best + 1] * gains.first_hz
+    sets = _parameters(at_hz, profile.values[best : best + 1], family.route, gains.coupling_unit)
+    model = gains.model.with_parameters(dict(zip(PARAMETERS, sets[0], strict=True)))
+    before = float(gains.z @ gains.z)
+    return ModeAdded(
+        model=dataclasses.replace(model, name="the criticised model with a second mode added"),
+        route=family.route, frequency_hz=float(at_hz[0]), chi2_before=before,
+        chi2_after=before - float(profile.profile[best]),
+        reference_gain=float(decision.observed.reference[0]),
+    )  # fmt: skip

@@ -29,6 +29,7 @@ element with unit shape).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -284,6 +285,42 @@ class ModalModel(JsonDocument):
             " + ".join(parts)
             + f" = −{spec.participation:.4g}·a_base,  ω{mode} = 2π·{spec.frequency_hz:.6g} Hz"
         )
+
+    def with_parameters(self, values: Mapping[str, float]) -> ModalModel:
+        """The model with the named parameters (:attr:`parameter_names`) set to ``values``.
+
+        Raises
+        ------
+        ValueError
+            A name is not one of :attr:`parameter_names`.
+        """
+        unknown = sorted(set(values) - set(self.parameter_names))
+        if unknown:
+            raise ValueError(f"unknown parameters {unknown}; the model has {self.parameter_names}")
+        fields = ("frequency_hz", "damping_ratio", "participation")
+        modes = [
+            dataclasses.replace(
+                mode,
+                **{f: float(values[name]) for f in fields if (name := f"mode{m}.{f}") in values},
+            )
+            for m, mode in enumerate(self.modes, start=1)
+        ]
+        shapes = [
+            tuple(float(values.get(f"joint{j}.mode{m}", v)) for m, v in enumerate(row, start=1))
+            for j, row in enumerate(self.joint_shapes, start=1)
+        ]
+        elements = [
+            dataclasses.replace(e, coefficient=float(values.get(e.label, e.coefficient)))
+            for e in self.elements
+        ]
+        couplings = [
+            dataclasses.replace(c, coefficient=float(values.get(f"coupling{i}", c.coefficient)))
+            for i, c in enumerate(self.couplings, start=1)
+        ]
+        return dataclasses.replace(
+            self, modes=tuple(modes), joint_shapes=tuple(shapes), elements=tuple(elements),
+            couplings=tuple(couplings),
+        )  # fmt: skip
 
     # ------------------------------------------------------- one-mode models
     @classmethod
