@@ -85,9 +85,11 @@ class Verdict(StrEnum):
         The decision fires and no catalogue effect is proposed: the free-form describing
         functions show the shape of what is missing.
     SECOND_MODE
-        The decision fires and a second mode exchanging energy with the measured one (or
-        seen beside it) locates a frequency and gains more than its own calibrated
-        threshold and than the catalogue's best column by :data:`SEPARATION`
+        A second mode exchanging energy with the measured one (or seen beside it) locates
+        a frequency and gains more than its own calibrated threshold and than the
+        catalogue's best column by :data:`SEPARATION`; or, in multi-point records, its
+        participation names it — its drive at ``2ω`` beyond a linear mode's, or its
+        fundamental shaped by a resonance near the first
         (:mod:`identification.criticism.second_mode`).
     """
 

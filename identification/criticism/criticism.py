@@ -332,8 +332,9 @@ class Criticism:
 
     @property
     def significant(self) -> bool:
-        """Something is missing: the calibrated decision fires, or a second mode is named
-        by its own calibrated test (:mod:`~identification.criticism.second_mode`)."""
+        """Something is missing: the calibrated decision fires, or a second mode is named —
+        by its own calibrated test, or by its participation at the sensors
+        (:mod:`~identification.criticism.second_mode`)."""
         return self.decision.significant or self.second_mode.named
 
     @cached_property
