@@ -66,6 +66,7 @@ __all__ = [
     "grid_backbones",
     "grid_counts",
     "highest_before",
+    "mask_reasons",
     "measured_grid",
     "measured_on_grid",
     "passed_curves",
@@ -88,6 +89,14 @@ def highest_before(drive: np.ndarray, powered: np.ndarray) -> np.ndarray:
     highest = np.maximum.accumulate(np.where(powered, drive, -np.inf), axis=-1)
     first = np.full((*drive.shape[:-1], 1), -np.inf)
     return np.concatenate([first, highest[..., :-1]], axis=-1)
+
+
+def mask_reasons(solved: np.ndarray, powered: np.ndarray, passed: np.ndarray) -> np.ndarray:
+    """Each point's mask code: 0 for a backbone point, else ``1 +`` the index in
+    :data:`MASK_REASONS` of the first that holds — the balance did not solve there, the
+    hold needs no power input, a test stepping its level up has passed it."""
+    codes = [1 + MASK_REASONS.index(r) for r in ("no_solution", "no_power_input", "passed")]
+    return np.select([~solved, ~powered, passed], codes, default=0)
 
 
 def passed_curves(reasons: np.ndarray) -> np.ndarray:
@@ -224,9 +233,7 @@ def grid_backbones(
     ).base_acceleration  # fmt: skip
     falling = np.isfinite(nudged) & (nudged <= needed_m_s2[:, index])
     passed = (needed_m_s2[:, index] <= before[:, index]) | falling
-    reasons = np.select(
-        [~solved[:, index], ~powered[:, index], passed], [1, 2, 3], default=0
-    ).astype(np.int8)
+    reasons = mask_reasons(solved[:, index], powered[:, index], passed).astype(np.int8)
     exists = reasons == 0
     values = np.stack(
         [

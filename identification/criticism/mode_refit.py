@@ -475,12 +475,6 @@ class ModeAdded:
             f"free-form reference takes {self.reference_gain:.4g})"
         )
 
-    def to_dict(self) -> dict[str, object]:
-        return {"model": self.model.to_dict(), "route": self.route,
-                "frequency_hz": self.frequency_hz, "chi2_before": self.chi2_before,
-                "chi2_after": self.chi2_after, "gain": self.gain,
-                "reference_gain": self.reference_gain, "text": self.text}  # fmt: skip
-
 
 def add_mode(decision: Decision, frequency_hz: float) -> ModeAdded:
     """The criticised model with a second mode near ``frequency_hz`` added.

@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike
 from identification.artifacts import versions
 from surrogates.dataset.container import ANALYTICAL, FORMAT, FORMAT_VERSION, BackboneDataset
 from surrogates.dataset.design import sample_parameters
-from surrogates.grid import grid_counts, highest_before, passed_curves
+from surrogates.grid import grid_counts, highest_before, mask_reasons, passed_curves
 from surrogates.runtime import MASK_CHANNEL, OTHER_MODES_CHANNEL, SurrogateSpec
 
 __all__ = [
@@ -97,8 +97,7 @@ def grid_values(backbones: ModeBackbones) -> tuple[np.ndarray, np.ndarray]:
     # A test stepping its level up holds a point only where its drive exceeds every drive
     # below it on the grid (the one-mode grid's "passed").
     reachable = powered & (drive > highest_before(drive, powered))
-    # Codes 1 + the index in MASK_REASONS, as the one-mode grid's.
-    reasons = np.select([~settled, ~powered, ~reachable], [1, 2, 3], default=0)
+    reasons = mask_reasons(settled, powered, ~reachable)
     values = np.stack([frequency, damping, drive, other, reachable.astype(float)], axis=-1)
     values[~reachable, :4] = 0.0
     return values, reasons
